@@ -1,0 +1,1 @@
+"""Pure-Python core of frog_bridge: no rclpy imports, unit-tested without ROS."""

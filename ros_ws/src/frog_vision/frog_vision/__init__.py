@@ -1,0 +1,1 @@
+"""AprilTag tracking of the frog robot from an overhead camera: camera model, detection, pose and velocity estimation."""
