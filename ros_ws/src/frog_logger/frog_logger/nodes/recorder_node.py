@@ -1,0 +1,293 @@
+"""``recorder``: rosbag-free recording of raw CDR messages to MCAP.
+
+Subscribes to the topics given in ``topics`` (or to every visible topic, re-discovered
+while running) with ``raw=True`` so messages are written without deserialising, matches
+each topic's publishers' QoS, and hands the bytes to :class:`frog_logger.core.Recording`.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import re
+import signal
+import sys
+import time
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
+
+from frog_logger.core.message_definitions import MessageDefinitionError, full_message_definition
+from frog_logger.core.recording import Recording, RecordingError
+
+_PARAMS = [
+    # name, default, type, description
+    ("topics", [""], ParameterType.PARAMETER_STRING_ARRAY,
+     "topics to record; empty (or ['']) records every topic and keeps discovering new ones"),
+    ("exclude_regex", "", ParameterType.PARAMETER_STRING,
+     "topics matching this regular expression are not recorded (all-topics mode)"),
+    ("include_hidden", False, ParameterType.PARAMETER_BOOL,
+     "also record hidden topics (a name part starting with '_')"),
+    ("output_dir", "recordings", ParameterType.PARAMETER_STRING,
+     "folder for the MCAP files (created if missing)"),
+    ("file_prefix", "", ParameterType.PARAMETER_STRING,
+     "file name prefix; files are <prefix>_000.mcap, ... (default rec_<date>_<time>)"),
+    ("max_file_size_mb", 0.0, ParameterType.PARAMETER_DOUBLE,
+     "start a new file past this size [MB = 1e6 bytes]; 0 = no size split"),
+    ("max_file_duration_s", 0.0, ParameterType.PARAMETER_DOUBLE,
+     "start a new file after this duration [s]; 0 = no time split"),
+    ("compression", "zstd", ParameterType.PARAMETER_STRING, "chunk compression: zstd, lz4, none"),
+    ("flush_period_s", 0.5, ParameterType.PARAMETER_DOUBLE,
+     "close the open chunk this often [s]: the most a SIGKILL can lose"),
+    ("discovery_period_s", 0.5, ParameterType.PARAMETER_DOUBLE,
+     "how often to look for new topics and publishers [s]"),
+    ("queue_depth", 1000, ParameterType.PARAMETER_INTEGER,
+     "subscription history depth per topic (reliable topics buffer this many messages)"),
+    ("retry_period_s", 5.0, ParameterType.PARAMETER_DOUBLE,
+     "after a write error (disk full), try a new file this often [s]"),
+]
+
+
+class ConfigurationError(ValueError):
+    """A parameter value that makes recording impossible (fatal at start-up)."""
+
+
+def _qos_to_dict(qos) -> dict:
+    def dur(d):
+        return getattr(d, "nanoseconds", 0)
+    return {
+        "reliability": qos.reliability.name.lower(),
+        "durability": qos.durability.name.lower(),
+        "history": qos.history.name.lower(),
+        "depth": int(qos.depth),
+        "deadline_ns": dur(qos.deadline),
+        "lifespan_ns": dur(qos.lifespan),
+        "liveliness": qos.liveliness.name.lower(),
+    }
+
+
+def _message_class(type_name: str):
+    pkg, kind, name = type_name.split("/")
+    if kind != "msg":
+        raise ImportError(f"{type_name!r} is not a message type")
+    return getattr(importlib.import_module(f"{pkg}.msg"), name)
+
+
+class _RawCallback:
+    """Subscription callback taking (bytes, message info): rclpy passes both."""
+
+    def __init__(self, node: "RecorderNode", topic: str):
+        self.node, self.topic = node, topic
+
+    def __call__(self, data, info):
+        self.node.on_message(self.topic, data, info)
+
+
+class RecorderNode(Node):
+    """Records topics to MCAP; see the module docstring and ``ros2 param list /recorder``."""
+
+    def __init__(self, **kwargs):
+        super().__init__("recorder", **kwargs)
+        for name, default, ptype, desc in _PARAMS:
+            self.declare_parameter(name, default, ParameterDescriptor(
+                type=ptype, description=desc, read_only=True))
+        p = {name: self.get_parameter(name).value for name, *_ in _PARAMS}
+        self.topics = [t for t in (p["topics"] or []) if t]
+        self._validate(p)
+        self.include_hidden = p["include_hidden"]
+        self.exclude = re.compile(p["exclude_regex"]) if p["exclude_regex"] else None
+        self.queue_depth = p["queue_depth"]
+        prefix = p["file_prefix"] or time.strftime("rec_%Y%m%d_%H%M%S")
+        try:
+            self.recording = Recording(
+                p["output_dir"], prefix,
+                max_file_bytes=int(p["max_file_size_mb"] * 1e6),
+                max_file_duration_s=p["max_file_duration_s"],
+                compression=p["compression"],
+                metadata={"node": self.get_fully_qualified_name(),
+                          "requested_topics": json.dumps(self.topics or "all")})
+        except RecordingError as exc:
+            raise ConfigurationError(str(exc)) from exc
+        try:
+            self._start()
+        except BaseException:
+            self.recording.close()  # never leave an unfinished file behind a failed start
+            raise
+
+    def _start(self) -> None:
+        p = {name: self.get_parameter(name).value for name, *_ in _PARAMS}
+        self._recorded: dict[str, object] = {}
+        self._rejected: dict[str, str] = {}      # topic -> reason, logged once
+        self._last_error_log = 0.0
+        self._last_retry = 0.0
+        self._retry_period = p["retry_period_s"]
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_timer(p["discovery_period_s"], self.discover)
+        self.create_timer(p["flush_period_s"], self.flush)
+        self.create_timer(1.0, self.publish_diagnostics)
+        self.get_logger().info(
+            f"recording {'topics ' + ', '.join(self.topics) if self.topics else 'all topics'} "
+            f"to {self.recording.current_file}")
+        self.discover()
+
+    @staticmethod
+    def _validate(p: dict) -> None:
+        for key in ("flush_period_s", "discovery_period_s", "retry_period_s"):
+            if not p[key] > 0:
+                raise ConfigurationError(f"parameter {key} must be > 0, got {p[key]}")
+        for key in ("max_file_size_mb", "max_file_duration_s"):
+            if p[key] < 0:
+                raise ConfigurationError(f"parameter {key} must be >= 0, got {p[key]}")
+        if p["queue_depth"] < 1:
+            raise ConfigurationError(f"parameter queue_depth must be >= 1, got {p['queue_depth']}")
+        if p["compression"] not in ("zstd", "lz4", "none"):
+            raise ConfigurationError(
+                f"parameter compression must be zstd, lz4 or none, got {p['compression']!r}")
+        try:
+            re.compile(p["exclude_regex"])
+        except re.error as exc:
+            raise ConfigurationError(f"parameter exclude_regex is not a valid regular "
+                                     f"expression: {exc}") from exc
+
+    # -- discovery ---------------------------------------------------------------------
+    def _wanted(self, topic: str) -> bool:
+        if self.topics:
+            return topic in self.topics
+        if not self.include_hidden and any(part.startswith("_") for part in topic.split("/")):
+            return False
+        return not (self.exclude and self.exclude.search(topic))
+
+    def discover(self) -> None:
+        """Subscribe to wanted topics that have publishers and are not yet recorded."""
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._recorded or topic in self._rejected or not self._wanted(topic):
+                continue
+            if len(types) != 1:
+                self._reject(topic, f"it has several types {types}; cannot record one channel")
+                continue
+            infos = self.get_publishers_info_by_topic(topic)
+            if not infos:
+                continue  # only subscribers so far: wait for a publisher to learn its QoS
+            self._subscribe(topic, types[0], infos)
+
+    def _reject(self, topic: str, reason: str) -> None:
+        self._rejected[topic] = reason
+        self.get_logger().error(f"not recording {topic}: {reason}")
+
+    def _subscribe(self, topic: str, type_name: str, infos) -> None:
+        try:
+            msg_class = _message_class(type_name)
+            definition = full_message_definition(type_name)
+        except (ImportError, AttributeError, ValueError, MessageDefinitionError) as exc:
+            self._reject(topic, f"unknown message type {type_name!r} ({exc})")
+            return
+        offered = [i.qos_profile for i in infos]
+        reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+        latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=self.queue_depth,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+        self.recording.add_topic(topic, type_name, definition,
+                                 {"offered": [_qos_to_dict(q) for q in offered],
+                                  "subscribed": _qos_to_dict(qos)})
+        self._recorded[topic] = self.create_subscription(
+            msg_class, topic, _RawCallback(self, topic), qos, raw=True)
+        self.get_logger().info(f"recording {topic} [{type_name}] "
+                               f"({qos.reliability.name.lower()}, {qos.durability.name.lower()})")
+
+    # -- data --------------------------------------------------------------------------
+    def on_message(self, topic: str, data: bytes, info) -> None:
+        now = time.time_ns()
+        published = info.get("source_timestamp") if isinstance(info, dict) else None
+        if not self.recording.write(topic, data, now, published):
+            self._log_write_error()
+
+    def flush(self) -> None:
+        if self.recording.error is None:
+            if not self.recording.flush():
+                self._log_write_error()
+            return
+        now = time.monotonic()
+        if now - self._last_retry >= self._retry_period:
+            self._last_retry = now
+            if self.recording.retry():
+                self.get_logger().warning(
+                    f"recording again into {self.recording.current_file} after a write error; "
+                    f"{self.recording.dropped_messages} messages were lost meanwhile")
+
+    def _log_write_error(self) -> None:
+        now = time.monotonic()
+        if now - self._last_error_log >= 2.0:
+            self._last_error_log = now
+            self.get_logger().error(
+                f"{self.recording.error}; {self.recording.dropped_messages} messages dropped so "
+                f"far; will retry in a new file every {self._retry_period:g} s "
+                f"(salvage the broken file with: frog-log recover)")
+
+    def publish_diagnostics(self) -> None:
+        rec = self.recording
+        status = DiagnosticStatus(
+            name=f"{self.get_name()}: recording", hardware_id="",
+            level=DiagnosticStatus.ERROR if rec.error else DiagnosticStatus.OK,
+            message=rec.error or f"recording {len(rec.topics)} topics")
+        status.values = [
+            KeyValue(key="file", value=str(rec.current_file)),
+            KeyValue(key="messages", value=str(rec.message_count)),
+            KeyValue(key="dropped_messages", value=str(rec.dropped_messages)),
+            KeyValue(key="files", value=str(len(rec.files))),
+        ]
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self._diag_pub.publish(msg)
+
+    def close(self) -> None:
+        rec = self.recording
+        try:
+            rec.close()
+        except RecordingError as exc:
+            self.get_logger().error(str(exc))
+        counts = ", ".join(f"{t.name}: {t.message_count}" for t in rec.topics.values())
+        if rec.message_count == 0:
+            self.get_logger().warning(f"no messages were recorded (files: {rec.files})")
+        self.get_logger().info(f"closed {len(rec.files)} file(s) {[str(f) for f in rec.files]}; "
+                               f"{rec.message_count} messages ({counts}); "
+                               f"dropped {rec.dropped_messages}")
+
+
+def _raise_keyboard_interrupt(signum, frame):
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def main(args=None) -> int:
+    # Handle SIGINT/SIGTERM ourselves (not rclpy's handler, which invalidates the context
+    # first), so the node can still log while it finishes its files.
+    signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
+    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        node = RecorderNode()
+        rclpy.spin(node)
+    except (ConfigurationError, ParameterException) as exc:
+        print(f"[recorder] fatal configuration error: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.close()
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
