@@ -162,7 +162,7 @@ class Recording:
                                  f"{_describe_os_error(exc)}") from exc
         self.files.append(path)
         self._stream, self._writer = stream, writer
-        self._file_start_ns = now
+        self._file_start_ns = None   # log time of the file's first message
         self._channel_ids = {}
         self._file_counts = {}
         for topic in self.topics.values():
@@ -232,12 +232,15 @@ class Recording:
     def _needs_split(self, now_ns: int) -> bool:
         if self.max_file_bytes and self._stream.tell() >= self.max_file_bytes:
             return True
+        if self._file_start_ns is None:
+            self._file_start_ns = now_ns
         return bool(self.max_file_duration_ns
                     and now_ns - self._file_start_ns >= self.max_file_duration_ns)
 
     def _split(self) -> None:
         self._finish_file()
         self._open_next_file()
+        self._file_start_ns = None
 
     def flush(self) -> bool:
         """Close the open chunk and push it to the OS, bounding what a SIGKILL can lose."""
