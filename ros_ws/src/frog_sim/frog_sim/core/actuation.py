@@ -1,0 +1,376 @@
+"""SMA limb actuation: the paper's piecewise logistic curvature model (eq. 9).
+
+    kappa(t) = C1a / (1 + exp(-C2a (t - C3a))) + C4a     for t <  t0  (actuation)
+    kappa(t) = C1d / (1 + exp(-C2d (t - C3d))) + C4d     for t >= t0  (de-actuation)
+
+``t`` is the time since the limb was fired. One model is fitted to every measured
+(EGaIn, frequency) mean profile in ``limb_curvature_profiles.csv`` (paper,
+"Actuator Characterization"). The switch time t0 is the time of the measured
+curvature minimum (end of the actuation phase). After the measured cycle
+(t >= 1/f) a limb that is not fired again holds the end-of-cycle curvature.
+
+The fitted coefficients are a generated artefact: they are cached as JSON in
+``$FROG_SIM_CACHE_DIR`` (default ``~/.cache/frog_sim``), keyed by the SHA-1 of the
+data file and the fit version, with the RMS fit error of each profile; never in git.
+
+Stiffness: while a limb is in its actuation phase (0 <= t < t0, SMA hot) its Young's
+modulus is E_max, otherwise E_0 (paper: E_0 = 3.0 MPa, E_max = 8.04 MPa).
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import os
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+from scipy.optimize import curve_fit
+
+FIT_VERSION = 1
+DATA_FILE_NAME = 'limb_curvature_profiles.csv'
+CALIBRATION_FILE_NAME = 'calibration_runs_10pct.csv'
+
+
+def find_data_dir() -> Path:
+    """Directory with the frog measurements (``$FROG_DATA_DIR`` or ``<ancestor>/shared/data/frog``).
+
+    Raises
+    ------
+    FileNotFoundError
+        If no directory holding ``limb_curvature_profiles.csv`` is found.
+    """
+    env = os.environ.get('FROG_DATA_DIR')
+    if env:
+        path = Path(env)
+        if (path / DATA_FILE_NAME).is_file():
+            return path
+        raise FileNotFoundError(f'FROG_DATA_DIR={env} does not contain {DATA_FILE_NAME}')
+    for parent in Path(__file__).resolve().parents:
+        for cand in (parent / 'shared' / 'data' / 'frog', parent.parent / 'shared' / 'data' / 'frog'):
+            if (cand / DATA_FILE_NAME).is_file():
+                return cand
+    raise FileNotFoundError(f'{DATA_FILE_NAME} not found; set FROG_DATA_DIR to the folder '
+                            'with the frog measurements (shared/data/frog)')
+
+
+def cache_dir() -> Path:
+    """Directory for generated artefacts (``$FROG_SIM_CACHE_DIR`` or ``~/.cache/frog_sim``)."""
+    path = Path(os.environ.get('FROG_SIM_CACHE_DIR', Path.home() / '.cache' / 'frog_sim'))
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def read_curvature_profiles(path: Path | str | None = None) -> dict:
+    """Read the measured profiles.
+
+    Returns
+    -------
+    dict
+        ``{(egain_pct, frequency_hz): (t_s (n,), curvature_per_m (n,))}`` with keys
+        rounded to 0.1.
+    """
+    path = Path(path) if path else find_data_dir() / DATA_FILE_NAME
+    rows: dict = {}
+    with open(path, newline='') as fh:
+        for r in csv.DictReader(fh):
+            key = (round(float(r['egain_vol_pct']), 1), round(float(r['frequency_hz']), 1))
+            rows.setdefault(key, []).append((float(r['t_s']), float(r['curvature_per_m'])))
+    out = {}
+    for key, vals in rows.items():
+        arr = np.array(sorted(vals))
+        out[key] = (arr[:, 0], arr[:, 1])
+    return out
+
+
+def _logistic(t, c1, c2, c3, c4):
+    z = np.clip(-c2 * (t - c3), -700.0, 700.0)
+    return c1 / (1.0 + np.exp(z)) + c4
+
+
+@dataclass(frozen=True)
+class CurvatureProfile:
+    """Fitted eq. 9 model of one (EGaIn, frequency) profile.
+
+    Attributes
+    ----------
+    egain_vol_pct, frequency_hz : float
+    coefficients : tuple of 8 float
+        C1a, C2a, C3a, C4a, C1d, C2d, C3d, C4d (1/m, 1/s, s, 1/m).
+    switch_time : float
+        t0 [s], end of the actuation phase.
+    cycle_time : float
+        1 / frequency [s].
+    rms_error : float
+        RMS of the fit over the measured cycle [1/m].
+    """
+
+    egain_vol_pct: float
+    frequency_hz: float
+    coefficients: tuple
+    switch_time: float
+    cycle_time: float
+    rms_error: float
+
+    def curvature(self, time_since_fire) -> np.ndarray:
+        """Curvature [1/m] at ``time_since_fire`` [s] (array-like; negative = never fired)."""
+        tau = np.asarray(time_since_fire, dtype=float)
+        c = self.coefficients
+        act = _logistic(tau, *c[:4])
+        deact = _logistic(np.minimum(tau, self.cycle_time), *c[4:])
+        out = np.where(tau < self.switch_time, act, deact)
+        return np.where(tau < 0, self.relaxed_curvature, out)
+
+    @property
+    def relaxed_curvature(self) -> float:
+        """Curvature of a limb that has not been fired for a whole cycle [1/m]."""
+        return float(_logistic(self.cycle_time, *self.coefficients[4:]))
+
+    def as_row(self) -> np.ndarray:
+        """Numba row: 8 coefficients, switch time, cycle time."""
+        return np.array(list(self.coefficients) + [self.switch_time, self.cycle_time])
+
+
+def fit_profile(t: np.ndarray, kappa: np.ndarray, egain: float, frequency: float) -> CurvatureProfile:
+    """Fit eq. 9 to one measured profile (scipy ``curve_fit`` on each phase).
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Time since firing [s].
+    kappa : ndarray, shape (n,)
+        Mean curvature [1/m].
+
+    Returns
+    -------
+    CurvatureProfile
+    """
+    smooth = np.convolve(kappa, np.ones(5) / 5.0, mode='same')
+    smooth[:2] = kappa[:2]
+    smooth[-2:] = kappa[-2:]
+    i_min = int(np.argmin(smooth))
+    t_switch = float(t[i_min])
+    cycle = 1.0 / frequency
+    k_start, k_min, k_end = float(kappa[0]), float(kappa[i_min]), float(kappa[-1])
+    ta, ka = t[:i_min + 1], kappa[:i_min + 1]
+    td, kd = t[i_min:], kappa[i_min:]
+    p0a = [k_min - k_start, 60.0, 0.5 * t_switch, k_start]
+    p0d = [k_end - k_min, 10.0, t_switch + 0.3 * (cycle - t_switch), k_min]
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')
+        try:
+            pa, _ = curve_fit(_logistic, ta, ka, p0=p0a, maxfev=20000)
+        except RuntimeError:
+            pa = np.array(p0a)
+        try:
+            pd, _ = curve_fit(_logistic, td, kd, p0=p0d, maxfev=20000)
+        except RuntimeError:
+            pd = np.array(p0d)
+    prof = CurvatureProfile(float(egain), float(frequency), tuple(float(v) for v in (*pa, *pd)),
+                            t_switch, cycle, 0.0)
+    rms = float(np.sqrt(np.mean((prof.curvature(t) - kappa) ** 2)))
+    return CurvatureProfile(prof.egain_vol_pct, prof.frequency_hz, prof.coefficients,
+                            t_switch, cycle, rms)
+
+
+class ActuationLibrary:
+    """All fitted profiles, loaded from the cache or fitted on first use.
+
+    Examples
+    --------
+    >>> lib = ActuationLibrary.load()                      # doctest: +SKIP
+    >>> lib.profile(10, 1.0).relaxed_curvature             # doctest: +SKIP
+    127.3...
+    """
+
+    def __init__(self, profiles: dict, source: dict):
+        self.profiles = profiles
+        self.source = source
+
+    @classmethod
+    def load(cls, data_path: Path | str | None = None, use_cache: bool = True) -> 'ActuationLibrary':
+        """Load the cached fit for ``data_path`` or fit all profiles and cache them."""
+        path = Path(data_path) if data_path else find_data_dir() / DATA_FILE_NAME
+        digest = hashlib.sha1(path.read_bytes()).hexdigest()
+        cache_file = cache_dir() / f'actuation_fit_v{FIT_VERSION}_{digest[:12]}.json'
+        if use_cache and cache_file.is_file():
+            try:
+                return cls._from_json(json.loads(cache_file.read_text()))
+            except (ValueError, KeyError):
+                pass  # corrupt cache: refit
+        data = read_curvature_profiles(path)
+        profiles = {key: fit_profile(t, k, *key) for key, (t, k) in sorted(data.items())}
+        source = {'data_file': str(path), 'data_sha1': digest, 'fit_version': FIT_VERSION,
+                  'created_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
+                  'model': 'paper eq. 9 piecewise logistic, curve_fit per phase',
+                  'units': {'coefficients': 'C1,C4 [1/m]; C2 [1/s]; C3 [s]',
+                            'switch_time': 's', 'cycle_time': 's', 'rms_error': '1/m'}}
+        lib = cls(profiles, source)
+        if use_cache:
+            tmp = cache_file.with_suffix('.tmp')
+            tmp.write_text(json.dumps(lib._to_json(), indent=1))
+            tmp.replace(cache_file)
+            lib.source['cache_file'] = str(cache_file)
+        return lib
+
+    def _to_json(self) -> dict:
+        return {'source': self.source, 'profiles': [
+            {'egain_vol_pct': p.egain_vol_pct, 'frequency_hz': p.frequency_hz,
+             'coefficients': list(p.coefficients), 'switch_time': p.switch_time,
+             'cycle_time': p.cycle_time, 'rms_error': p.rms_error}
+            for p in self.profiles.values()]}
+
+    @classmethod
+    def _from_json(cls, obj: dict) -> 'ActuationLibrary':
+        profiles = {}
+        for p in obj['profiles']:
+            prof = CurvatureProfile(p['egain_vol_pct'], p['frequency_hz'], tuple(p['coefficients']),
+                                    p['switch_time'], p['cycle_time'], p['rms_error'])
+            profiles[(round(prof.egain_vol_pct, 1), round(prof.frequency_hz, 1))] = prof
+        return cls(profiles, obj['source'])
+
+    def frequencies(self, egain_vol_pct: float) -> list[float]:
+        """Measured frequencies [Hz] for one EGaIn fraction."""
+        return sorted(f for e, f in self.profiles if e == round(float(egain_vol_pct), 1))
+
+    def profile(self, egain_vol_pct: float, frequency_hz: float,
+                tolerance_hz: float = 0.051) -> CurvatureProfile:
+        """Profile measured nearest to ``frequency_hz`` (within ``tolerance_hz``).
+
+        Raises
+        ------
+        ValueError
+            If the EGaIn fraction was not measured or no frequency is close enough.
+        """
+        egains = sorted({e for e, _ in self.profiles})
+        e = round(float(egain_vol_pct), 1)
+        if e not in egains:
+            raise ValueError(f'EGaIn {egain_vol_pct} % has no measured profile; expected one of {egains}')
+        freqs = self.frequencies(e)
+        f = min(freqs, key=lambda q: abs(q - frequency_hz))
+        if abs(f - frequency_hz) > tolerance_hz:
+            raise ValueError(f'frequency {frequency_hz} Hz was not measured for EGaIn {e} %; '
+                             f'measured: {freqs} Hz')
+        return self.profiles[(e, f)]
+
+    def nearest_profile(self, egain_vol_pct: float, frequency_hz: float) -> CurvatureProfile:
+        """Profile at the measured frequency nearest to ``frequency_hz`` (no tolerance)."""
+        return self.profile(egain_vol_pct, frequency_hz, tolerance_hz=np.inf)
+
+    def fit_report(self) -> list[tuple[float, float, float]]:
+        """Rows ``(egain %, frequency Hz, RMS fit error 1/m)``."""
+        return [(p.egain_vol_pct, p.frequency_hz, p.rms_error) for p in self.profiles.values()]
+
+
+@dataclass
+class ActuatorArrays:
+    """Flat arrays that let the numba stepper update limb properties at any time.
+
+    Attributes
+    ----------
+    limb_profile : ndarray, shape (L, 10)
+        :meth:`CurvatureProfile.as_row` of each limb.
+    limb_young : ndarray, shape (L, 2)
+        (E_0, E_max) [Pa].
+    activation_times : ndarray, shape (K,)
+        Sorted firing times of all limbs, limb after limb [s].
+    activation_offsets : ndarray of int, shape (L + 1,)
+        Limb ``l`` owns ``activation_times[offsets[l]:offsets[l+1]]``.
+    bend_index, bend_limb : ndarray of int, shape (Ba,)
+        Actuated bending elements and their limb.
+    bend_sign : ndarray, shape (Ba,)
+        +1 / -1: orientation of the limb's curl (kappa0 = sign * kappa(t)).
+    bend_second_moment : ndarray, shape (Ba,)
+        I [m^4] (EI = E(t) I).
+    edge_index, edge_limb : ndarray of int, shape (Ea,)
+    edge_area : ndarray, shape (Ea,)
+        A [m^2] (EA = E(t) A).
+    """
+
+    limb_profile: np.ndarray
+    limb_young: np.ndarray
+    activation_times: np.ndarray
+    activation_offsets: np.ndarray
+    bend_index: np.ndarray
+    bend_limb: np.ndarray
+    bend_sign: np.ndarray
+    bend_second_moment: np.ndarray
+    edge_index: np.ndarray
+    edge_limb: np.ndarray
+    edge_area: np.ndarray
+
+    @classmethod
+    def empty(cls) -> 'ActuatorArrays':
+        """No actuated limbs."""
+        zi = np.zeros(0, dtype=np.int64)
+        zf = np.zeros(0)
+        return cls(np.zeros((0, 10)), np.zeros((0, 2)), zf, np.zeros(1, dtype=np.int64),
+                   zi, zi.copy(), zf.copy(), zf.copy(), zi.copy(), zi.copy(), zf.copy())
+
+    def set_activation_times(self, times_per_limb) -> None:
+        """Replace the firing times: ``times_per_limb[l]`` is a 1-D array for limb ``l``."""
+        arrays = [np.sort(np.asarray(t, dtype=float).ravel()) for t in times_per_limb]
+        if len(arrays) != self.limb_profile.shape[0]:
+            raise ValueError(f'got firing times for {len(arrays)} limbs, expected '
+                             f'{self.limb_profile.shape[0]}')
+        self.activation_offsets = np.concatenate([[0], np.cumsum([len(a) for a in arrays])]).astype(np.int64)
+        self.activation_times = np.concatenate(arrays) if arrays else np.zeros(0)
+
+    def as_tuple(self):
+        """Arguments of :func:`apply_actuation` after ``t``."""
+        return (self.limb_profile, self.limb_young, self.activation_times, self.activation_offsets,
+                self.bend_index, self.bend_limb, self.bend_sign, self.bend_second_moment,
+                self.edge_index, self.edge_limb, self.edge_area)
+
+
+@njit(cache=True)
+def _logistic_scalar(t, c1, c2, c3, c4):
+    z = -c2 * (t - c3)
+    if z > 700.0:
+        z = 700.0
+    elif z < -700.0:
+        z = -700.0
+    return c1 / (1.0 + np.exp(z)) + c4
+
+
+@njit(cache=True)
+def profile_value(row, tau):
+    """eq. 9 for one numba profile row at time ``tau`` since firing (< 0: never fired)."""
+    if tau < 0.0:
+        return _logistic_scalar(row[9], row[4], row[5], row[6], row[7])
+    if tau < row[8]:
+        return _logistic_scalar(tau, row[0], row[1], row[2], row[3])
+    if tau > row[9]:
+        tau = row[9]
+    return _logistic_scalar(tau, row[4], row[5], row[6], row[7])
+
+
+@njit(cache=True)
+def apply_actuation(t, limb_profile, limb_young, activation_times, activation_offsets,
+                    bend_index, bend_limb, bend_sign, bend_second_moment, edge_index, edge_limb,
+                    edge_area, kappa0, ei, ea):
+    """Write the natural curvature and stiffness of actuated elements at time ``t`` [s]."""
+    n_limbs = limb_profile.shape[0]
+    kap = np.empty(n_limbs)
+    young = np.empty(n_limbs)
+    for limb in range(n_limbs):
+        lo = activation_offsets[limb]
+        hi = activation_offsets[limb + 1]
+        tau = -1.0
+        if hi > lo:
+            k = np.searchsorted(activation_times[lo:hi], t, side='right')
+            if k > 0:
+                tau = t - activation_times[lo + k - 1]
+        kap[limb] = profile_value(limb_profile[limb], tau)
+        heated = tau >= 0.0 and tau < limb_profile[limb, 8]
+        young[limb] = limb_young[limb, 1] if heated else limb_young[limb, 0]
+    for m in range(bend_index.shape[0]):
+        limb = bend_limb[m]
+        kappa0[bend_index[m]] = bend_sign[m] * kap[limb]
+        ei[bend_index[m]] = young[limb] * bend_second_moment[m]
+    for m in range(edge_index.shape[0]):
+        ea[edge_index[m]] = young[edge_limb[m]] * edge_area[m]

@@ -1,0 +1,222 @@
+"""Every physical parameter of the frog model, in one place, with its source.
+
+All values are SI (m, kg, s, N, Pa). Paper = seed ``000_be5af640e730d35d.txt``
+("Energy, Forces, and Equations of Motion", "Hydrodynamic Characterization",
+"Robot Electronics", Fig. 2). Where the paper is silent, the value is chosen from
+the physics of the described materials and the reasoning is written next to it;
+``PARAMETER_SOURCES`` holds the same text for reports (``frog-sim params``).
+
+Geometry (resolution of Fig. 2b)
+--------------------------------
+Fig. 2b gives L_o = 90 mm, L_i = 35 mm, H_f = 35 mm, H_a = 24 mm without a legend.
+We read L_o as the side of the square body (the centre line of the four stiff body
+rods, limbs attached at the corners, paper: "each joint node at the corners ... is
+connected to three different nodes") and L_i as the length of each limb. This is the
+only reading consistent with the paper's node count: at dl = L_o / 23 = 3.91 mm the
+body ring has 92 nodes and each limb adds 9, giving exactly N = 128 (paper: "dl ~ 4 mm
+resulting in N_total = 128 nodes"). H_f and H_a (front/aft dimensions of the
+rendering) are not needed by the planar rod network and are kept here only for
+reference.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+#: Density of water [kg/m^3] (paper, eq. 1-4: rho_f = 1000).
+WATER_DENSITY = 1000.0
+#: Density of EGaIn liquid metal [kg/m^3] (Dickey, Adv. Funct. Mater. 2008: 6.25 g/cm^3).
+EGAIN_DENSITY = 6250.0
+#: Density of the platinum-cure silicone of the limb layers [kg/m^3]
+#: (Smooth-On Ecoflex/Dragon Skin data sheets: 1.07-1.08 g/cm^3).
+SILICONE_DENSITY = 1080.0
+
+
+@dataclass(frozen=True)
+class FrogParameters:
+    """Physical and numerical parameters of the frog robot model (SI units).
+
+    Attributes are documented in ``PARAMETER_SOURCES``; use :meth:`replace` to
+    derive variants (``params.replace(egain_vol_pct=30)``).
+    """
+
+    # --- geometry (paper Fig. 2b; see module docstring) ---
+    body_side_length: float = 0.090          # L_o [m]
+    limb_length: float = 0.035               # L_i [m]
+    front_dimension_hf: float = 0.035        # H_f [m] (reference only)
+    aft_dimension_ha: float = 0.024          # H_a [m] (reference only)
+    body_edges_per_side: int = 23            # dl = L_o / 23 = 3.91 mm -> 128 nodes
+    # --- limbs ---
+    limb_radius: float = 0.002               # authors' code: rod radius ~2 mm
+    limb_young_relaxed: float = 3.0e6        # E_0 [Pa] (paper)
+    limb_young_heated: float = 8.04e6        # E_max [Pa] (paper; x2.68 while SMA is heated)
+    egain_vol_pct: float = 10.0              # EGaIn volume % of the interface layer
+    interface_layer_fraction: float = 1.0 / 3.0  # share of limb volume that is the LMEE layer
+    silicone_density: float = SILICONE_DENSITY
+    egain_density: float = EGAIN_DENSITY
+    # --- body ---
+    body_mass: float = 0.150                 # [kg] four 3S 300 mAh LiPo (~28 g each) + PCB + foam + silicone
+    body_height: float = 0.022               # [m] z-extent: neutrally buoyant 150 g over (90^2-35^2) mm^2
+    body_young_equivalent: float = 26.0e6    # [Pa] effective; "four elastic rods with high stiffness"
+    body_section_width: float = 0.0275       # [m] in-plane frame width (90 - 35) / 2 mm
+    # --- fluid (paper, Hydrodynamic Characterization) ---
+    fluid_density: float = WATER_DENSITY     # rho_f
+    limb_drag_normal: float = 1.0            # C_ln
+    limb_drag_tangent: float = 0.01          # C_lt
+    body_drag_normal: float = 0.8            # C_bn (calibrated by the authors)
+    body_drag_tangent: float = 0.008         # C_bt
+    added_mass_coefficient: float = 1.0      # C_a (theoretical value)
+    # --- actuation ---
+    pulse_duration: float = 0.080            # hardware pulse [s] (DESIGN.md; paper 70 ms)
+    primitive_period: float = 1.5            # one primitive per 1.5 s (DESIGN.md)
+    limb_curl_direction: str = 'backward'    # relaxed limbs curl toward -x (see frog_model)
+
+    def replace(self, **changes) -> 'FrogParameters':
+        """Return a copy with some fields changed (validated)."""
+        new = replace(self, **changes)
+        new.validate()
+        return new
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the first non-physical value."""
+        positive = ['body_side_length', 'limb_length', 'limb_radius', 'limb_young_relaxed',
+                    'limb_young_heated', 'body_mass', 'body_height', 'body_young_equivalent',
+                    'body_section_width', 'fluid_density', 'pulse_duration', 'primitive_period',
+                    'silicone_density', 'egain_density']
+        for name in positive:
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f'{name} = {value!r} must be a finite positive number')
+        for name in ['limb_drag_normal', 'limb_drag_tangent', 'body_drag_normal',
+                     'body_drag_tangent', 'added_mass_coefficient']:
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f'{name} = {value!r} must be finite and >= 0')
+        if not 0 <= self.egain_vol_pct <= 100:
+            raise ValueError(f'egain_vol_pct = {self.egain_vol_pct!r} must be in 0-100 %')
+        if not 0 < self.interface_layer_fraction <= 1:
+            raise ValueError(f'interface_layer_fraction = {self.interface_layer_fraction!r} '
+                             'must be in (0, 1]')
+        if int(self.body_edges_per_side) < 2:
+            raise ValueError(f'body_edges_per_side = {self.body_edges_per_side!r} must be >= 2')
+        if self.limb_curl_direction not in ('forward', 'backward'):
+            raise ValueError(f"limb_curl_direction = {self.limb_curl_direction!r}, "
+                             "expected 'forward' or 'backward'")
+
+    # ---- derived quantities -------------------------------------------------
+    @property
+    def edge_length(self) -> float:
+        """Rest length dl of every edge [m] (body side / edges per side)."""
+        return self.body_side_length / int(self.body_edges_per_side)
+
+    @property
+    def limb_edges(self) -> int:
+        """Number of edges per limb (limb length rounded to whole edges)."""
+        return max(2, int(round(self.limb_length / self.edge_length)))
+
+    @property
+    def limb_area(self) -> float:
+        """Limb cross-section area pi r^2 [m^2]."""
+        return np.pi * self.limb_radius ** 2
+
+    @property
+    def limb_second_moment(self) -> float:
+        """Limb area moment pi r^4 / 4 [m^4]."""
+        return np.pi * self.limb_radius ** 4 / 4.0
+
+    @property
+    def limb_density(self) -> float:
+        """Limb density [kg/m^3]: silicone with EGaIn in the interface layer (rule of mixtures)."""
+        phi = self.egain_vol_pct / 100.0 * self.interface_layer_fraction
+        return (1.0 - phi) * self.silicone_density + phi * self.egain_density
+
+    @property
+    def body_linear_density(self) -> float:
+        """Body mass per unit centre-line length [kg/m]."""
+        return self.body_mass / (4.0 * self.body_side_length)
+
+    @property
+    def body_bending_stiffness(self) -> float:
+        """Body EI [N m^2] with I = h w^3 / 12 of the frame section."""
+        return self.body_young_equivalent * self.body_height * self.body_section_width ** 3 / 12.0
+
+    @property
+    def body_stretching_stiffness(self) -> float:
+        """Body EA [N]."""
+        return self.body_young_equivalent * self.body_height * self.body_section_width
+
+    def as_dict(self) -> dict:
+        """Plain dict of all fields (for metadata)."""
+        return asdict(self)
+
+
+#: Human-readable provenance of every field of :class:`FrogParameters` (name -> (unit, source)).
+PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
+    'body_side_length': ('m', 'paper Fig. 2b L_o = 90 mm, read as body square side (gives N = 128)'),
+    'limb_length': ('m', 'paper Fig. 2b L_i = 35 mm, read as limb length (gives N = 128)'),
+    'front_dimension_hf': ('m', 'paper Fig. 2b H_f = 35 mm; not used by the planar network'),
+    'aft_dimension_ha': ('m', 'paper Fig. 2b H_a = 24 mm; not used by the planar network'),
+    'body_edges_per_side': ('-', 'dl = 90/23 = 3.91 mm ~ paper "dl ~ 4 mm, N = 128"'),
+    'limb_radius': ('m', "authors' related code: limb rod radius ~2 mm (D = 4 mm in eq. 1, 3)"),
+    'limb_young_relaxed': ('Pa', 'paper: E_0 = 3.0 MPa'),
+    'limb_young_heated': ('Pa', 'paper: E_max = 8.04 MPa while the SMA is heated (actuation phase)'),
+    'egain_vol_pct': ('%', 'design variable, 0-50 % (paper); 10 % for the calibration runs'),
+    'interface_layer_fraction': ('-', 'assumption: limb = 3 equal layers (stretched, LMEE, '
+                                 'unstretched silicone), paper Fig. 3a schematic'),
+    'silicone_density': ('kg/m^3', 'Smooth-On silicone data sheets 1.07-1.08 g/cm^3'),
+    'egain_density': ('kg/m^3', 'EGaIn 6.25 g/cm^3 (Dickey et al. 2008)'),
+    'body_mass': ('kg', 'estimate: four 3S 300 mAh LiPo (~28 g each, paper "Robot Electronics") '
+                  '+ PCB, foam, silicone'),
+    'body_height': ('m', 'neutral buoyancy (paper: foam cancels battery weight): 150 g / '
+                    '1000 kg/m^3 over the frame area 90^2 - 35^2 mm^2 = 22 mm; used as D in eq. 1, 3'),
+    'body_young_equivalent': ('Pa', 'assumption: "four elastic rods with high stiffness"; gives '
+                              'body EI ~ 2.6e4 x limb EI so the body stays square'),
+    'body_section_width': ('m', 'frame width (L_o - L_i)/2 = 27.5 mm'),
+    'fluid_density': ('kg/m^3', 'paper: rho_f = 1000'),
+    'limb_drag_normal': ('-', 'paper: C_ln = 1'),
+    'limb_drag_tangent': ('-', 'paper: C_lt = 0.01'),
+    'body_drag_normal': ('-', 'paper: C_bn = 0.8 (calibrated on the 10 % runs)'),
+    'body_drag_tangent': ('-', 'paper: C_bt = 0.008 = C_bn / 100'),
+    'added_mass_coefficient': ('-', 'paper: C_a = 1 (theoretical)'),
+    'pulse_duration': ('s', 'DESIGN.md hardware pulse 80 ms (paper characterisation 70 ms)'),
+    'primitive_period': ('s', 'DESIGN.md: one primitive per 1.5 s'),
+    'limb_curl_direction': ('-', 'assumption: relaxed limbs curl toward the rear; the mirrored '
+                            "layout ('forward') swims backward in simulation, so this is the "
+                            'layout that reproduces forward swimming'),
+}
+
+
+def parameter_table(params: FrogParameters | None = None) -> list[tuple[str, object, str, str]]:
+    """Rows ``(name, value, unit, source)`` for every parameter, plus derived values.
+
+    Parameters
+    ----------
+    params : FrogParameters, optional
+        Parameter set (default: :class:`FrogParameters` defaults).
+
+    Returns
+    -------
+    list of tuple
+        One row per field, then derived rows (dl, limb density, EI, EA, ...).
+    """
+    p = params or FrogParameters()
+    rows = [(name, value, *PARAMETER_SOURCES[name]) for name, value in p.as_dict().items()]
+    rows += [
+        ('edge_length (derived)', p.edge_length, 'm', 'L_o / body_edges_per_side'),
+        ('limb_edges (derived)', p.limb_edges, '-', 'round(L_i / dl)'),
+        ('limb_density (derived)', p.limb_density, 'kg/m^3', 'rule of mixtures'),
+        ('limb_EI_relaxed (derived)', p.limb_young_relaxed * p.limb_second_moment, 'N m^2',
+         'E_0 pi r^4/4'),
+        ('limb_EA_relaxed (derived)', p.limb_young_relaxed * p.limb_area, 'N', 'E_0 pi r^2'),
+        ('body_EI (derived)', p.body_bending_stiffness, 'N m^2', 'E_b h w^3/12'),
+        ('body_EA (derived)', p.body_stretching_stiffness, 'N', 'E_b h w'),
+    ]
+    return rows
+
+
+DEFAULT_PARAMETERS = FrogParameters()
+DEFAULT_PARAMETERS.validate()
+
+__all__ = ['FrogParameters', 'PARAMETER_SOURCES', 'parameter_table', 'DEFAULT_PARAMETERS',
+           'WATER_DENSITY', 'EGAIN_DENSITY', 'SILICONE_DENSITY']

@@ -1,0 +1,405 @@
+"""Public API of the frog simulator (no ROS): build, schedule, step/run, read state.
+
+Examples
+--------
+>>> from frog_sim.core.simulation import FrogSimulation
+>>> sim = FrogSimulation()                          # 10 % EGaIn, default dt   # doctest: +SKIP
+>>> sim.set_gait(frequency_hz=1.0, phase_offset=0.5)                           # doctest: +SKIP
+>>> traj = sim.run(5.0)                                                        # doctest: +SKIP
+>>> sim.rigid_body_state().body_velocity                                       # doctest: +SKIP
+>>> sim.execute_primitive('C')          # fire primitive C now (front first)  # doctest: +SKIP
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .actuation import ActuationLibrary, CurvatureProfile
+from .frog_model import FrogModel, build_frog_model
+from .integrator import ConvergenceError, ImplicitEulerIntegrator
+from .model_parameters import FrogParameters
+from .rigid_body import HeadingUnwrapper, RigidBodyState, nodal_velocities, rigid_body_state
+from .schedules import LIMB_NAMES, ActivationSchedule
+
+#: Default time step [s], chosen from the dt convergence study (see README of the report).
+DEFAULT_TIME_STEP = 2.0e-3
+#: Default Newton force tolerance [N] (limb node forces are ~1e-4 N).
+DEFAULT_FORCE_TOLERANCE = 1e-8
+
+__all__ = ['FrogSimulation', 'Trajectory', 'DEFAULT_TIME_STEP', 'ConvergenceError']
+
+
+@dataclass
+class Trajectory:
+    """Recorded samples of a run (all SI).
+
+    Attributes
+    ----------
+    time : ndarray, shape (T,)
+        [s]
+    positions : ndarray, shape (T, N, 2)
+        Node positions [m] (world frame).
+    com : ndarray, shape (T, 2)
+        Centre of mass [m] (eq. 10).
+    heading : ndarray, shape (T,)
+        [rad], unwrapped (eq. 11 resolved).
+    com_velocity : ndarray, shape (T, 2)
+        World-frame COM velocity [m/s].
+    body_velocity : ndarray, shape (T, 2)
+        COM velocity in the robot frame (forward, left) [m/s].
+    yaw_rate : ndarray, shape (T,)
+        [rad/s] (eq. 12).
+    """
+
+    time: np.ndarray
+    positions: np.ndarray
+    com: np.ndarray
+    heading: np.ndarray
+    com_velocity: np.ndarray
+    body_velocity: np.ndarray
+    yaw_rate: np.ndarray
+    metadata: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_samples(cls, samples, positions, metadata=None) -> 'Trajectory':
+        """Build from lists of :class:`RigidBodyState` and (N, 2) position arrays."""
+        return cls(time=np.array([s.time for s in samples]),
+                   positions=np.array(positions),
+                   com=np.array([s.com for s in samples]).reshape(-1, 2),
+                   heading=np.array([s.heading for s in samples]),
+                   com_velocity=np.array([s.com_velocity for s in samples]).reshape(-1, 2),
+                   body_velocity=np.array([s.body_velocity for s in samples]).reshape(-1, 2),
+                   yaw_rate=np.array([s.yaw_rate for s in samples]),
+                   metadata=dict(metadata or {}))
+
+    def forward_speed(self, start_time: float) -> float:
+        """Mean speed [m/s] along the initial heading: slope of a line fit to the
+        displacement after ``start_time`` (as for the calibration runs)."""
+        sel = self.time >= start_time
+        if sel.sum() < 2:
+            raise ValueError(f'fewer than 2 samples after t = {start_time} s')
+        h0 = self.heading[0]
+        direction = np.array([np.cos(h0), np.sin(h0)])
+        dist = (self.com[sel] - self.com[0]) @ direction
+        return float(np.polyfit(self.time[sel], dist, 1)[0])
+
+
+class FrogSimulation:
+    """The frog robot simulator: model + actuation + implicit Euler integrator.
+
+    Parameters
+    ----------
+    params : FrogParameters, optional
+        Physical parameters (EGaIn fraction, geometry, fluid ...).
+    time_step : float
+        dt [s] of every step (default :data:`DEFAULT_TIME_STEP`).
+    library : ActuationLibrary, optional
+        Fitted curvature profiles (default: loaded from the cache / fitted once).
+    solver : {'banded', 'sparse'}
+        Linear solver of the Newton steps.
+    force_tolerance : float
+        Newton residual tolerance [N].
+
+    Notes
+    -----
+    Typical use: ``set_gait`` or ``set_schedule`` / ``execute_primitive``; then ``step``
+    or ``run``; read ``node_positions`` and ``rigid_body_state()``. Start from a moving
+    state with ``set_velocity`` (paper eq. 13).
+    """
+
+    def __init__(self, params: FrogParameters | None = None, *, time_step: float = DEFAULT_TIME_STEP,
+                 library: ActuationLibrary | None = None, solver: str = 'banded',
+                 force_tolerance: float = DEFAULT_FORCE_TOLERANCE):
+        self.params = params or FrogParameters()
+        self.params.validate()
+        if not (np.isfinite(time_step) and time_step > 0):
+            raise ValueError(f'time_step = {time_step!r} s must be a positive number')
+        self.time_step = float(time_step)
+        self.library = library or ActuationLibrary.load()
+        self._solver = solver
+        self._force_tolerance = force_tolerance
+        default = self.library.nearest_profile(self.params.egain_vol_pct,
+                                               1.0 / self.params.primitive_period)
+        self._build(default)
+
+    # ------------------------------------------------------------------ construction
+    def _build(self, profile: CurvatureProfile) -> None:
+        self.profile = profile
+        self.model: FrogModel = build_frog_model(self.params, profile.relaxed_curvature)
+        self._actuator = self.model.actuator_arrays(profile)
+        self.integrator = ImplicitEulerIntegrator(
+            self.model.network, self.model.mass, fluid_density=self.params.fluid_density,
+            actuator=self._actuator, solver=self._solver, force_tolerance=self._force_tolerance)
+        self._schedule = ActivationSchedule.empty()
+        self._gait = None
+        self._horizon = -np.inf
+        self._unwrap = HeadingUnwrapper(0.0)
+        self._sync_schedule(force=True)
+
+    def reset(self) -> None:
+        """Back to the reference pose at rest, t = 0, no schedule (keeps the profile)."""
+        self._build(self.profile)
+
+    def use_profile(self, frequency_hz: float, exact: bool = True) -> CurvatureProfile:
+        """Drive the limbs with the profile measured at ``frequency_hz`` for this EGaIn.
+
+        The model is rebuilt only if the relaxed curvature changes (i.e. at t = 0);
+        later calls just switch the profile. Returns the chosen profile.
+
+        Raises
+        ------
+        ValueError
+            If ``exact`` and the frequency was not measured for this EGaIn fraction.
+        """
+        lib = self.library
+        prof = (lib.profile(self.params.egain_vol_pct, frequency_hz) if exact
+                else lib.nearest_profile(self.params.egain_vol_pct, frequency_hz))
+        if prof is self.profile:
+            return prof
+        if self.time == 0.0 and np.allclose(self.integrator.v, 0.0):
+            schedule, gait = self._schedule, self._gait
+            self._build(prof)
+            self._schedule, self._gait = schedule, gait
+        else:
+            self.profile = prof
+            self._actuator.limb_profile[:] = prof.as_row()
+        self._sync_schedule(force=True)
+        return prof
+
+    # ------------------------------------------------------------------ schedules
+    def set_gait(self, frequency_hz: float, phase_offset: float = 0.5, start: float | None = None,
+                 duration: float | None = None) -> None:
+        """Swim a periodic gait (all four limbs; rear pair ``phase_offset`` of a cycle later).
+
+        Parameters
+        ----------
+        frequency_hz : float
+            Must be a measured frequency for the model's EGaIn fraction.
+        phase_offset : float
+            In [0, 1).
+        start : float, optional
+            First firing time [s] (default: now).
+        duration : float, optional
+            Stop firing after this many seconds (default: forever).
+        """
+        ActivationSchedule.gait(frequency_hz, phase_offset, 0.0)  # validates
+        self.use_profile(frequency_hz)
+        start = self.time if start is None else float(start)
+        self._gait = (float(frequency_hz), float(phase_offset), start,
+                      np.inf if duration is None else float(duration))
+        self._sync_schedule(force=True)
+
+    def set_schedule(self, schedule: ActivationSchedule, profile_frequency_hz: float | None = None) -> None:
+        """Replace all firings by ``schedule`` (and stop any gait).
+
+        ``profile_frequency_hz`` picks the measured profile (default: nearest to one
+        primitive per ``primitive_period``).
+        """
+        if profile_frequency_hz is None:
+            profile_frequency_hz = 1.0 / self.params.primitive_period
+            self.use_profile(profile_frequency_hz, exact=False)
+        else:
+            self.use_profile(profile_frequency_hz)
+        self._gait = None
+        self._schedule = schedule
+        self._sync_schedule(force=True)
+
+    def execute_primitive(self, primitive, start: float | None = None) -> None:
+        """Fire a primitive (id 0-8 or 'A'-'I'): front limbs at ``start`` (default now),
+        rear limbs one pulse later. Adds to the current schedule; stops a running gait.
+
+        Raises
+        ------
+        ValueError
+            For an unknown primitive.
+        """
+        start = self.time if start is None else float(start)
+        extra = ActivationSchedule.primitive(primitive, start, self.params.pulse_duration)
+        if self._gait is not None:
+            self._schedule = self._schedule.merged(self._gait_schedule(until=self.time))
+            self._gait = None
+            self.use_profile(1.0 / self.params.primitive_period, exact=False)
+        self._schedule = self._schedule.merged(extra)
+        self._sync_schedule(force=True)
+
+    def fire_limbs(self, limbs, start: float | None = None) -> None:
+        """Fire the named limbs (e.g. ``['FL', 'BR']``) at ``start`` (default now)."""
+        start = self.time if start is None else float(start)
+        extra = ActivationSchedule({l: [start] for l in limbs})
+        self._schedule = self._schedule.merged(extra)
+        self._sync_schedule(force=True)
+
+    def _gait_schedule(self, until: float) -> ActivationSchedule:
+        f, phase, start, duration = self._gait
+        span = min(until, start + duration) - start
+        if span < 0:
+            return ActivationSchedule.empty()
+        return ActivationSchedule.gait(f, phase, span + 1e-12, start=start)
+
+    def _sync_schedule(self, force=False, until=None) -> None:
+        """Push firing times covering at least ``until`` to the numba arrays."""
+        until = self.time if until is None else until
+        if not force and until < self._horizon:
+            return
+        sched = self._schedule
+        horizon = np.inf
+        if self._gait is not None:
+            horizon = until + 10.0
+            sched = sched.merged(self._gait_schedule(until=horizon))
+        self._horizon = horizon
+        self._actuator.set_activation_times(sched.per_limb())
+        self.integrator.update_actuation(self.time)
+
+    @property
+    def schedule(self) -> ActivationSchedule:
+        """Firings known so far (explicit ones plus the gait up to the current horizon)."""
+        if self._gait is None:
+            return self._schedule
+        return self._schedule.merged(self._gait_schedule(until=self._horizon))
+
+    # ------------------------------------------------------------------ state
+    @property
+    def time(self) -> float:
+        """Simulated time [s]."""
+        return self.integrator.time
+
+    @property
+    def node_positions(self) -> np.ndarray:
+        """Node positions, shape (N, 2) [m] (a copy)."""
+        return self.integrator.x.reshape(-1, 2).copy()
+
+    @property
+    def node_velocities(self) -> np.ndarray:
+        """Node velocities, shape (N, 2) [m/s] (a copy)."""
+        return self.integrator.v.reshape(-1, 2).copy()
+
+    @property
+    def limb_curvatures(self) -> dict:
+        """Current natural curvature command of each limb [1/m] (unsigned)."""
+        out = {}
+        for limb in LIMB_NAMES:
+            b = self.model.limb_bends[limb][0]
+            out[limb] = float(self.integrator.kappa0[b] * self.model.limb_sign[limb])
+        return out
+
+    def rigid_body_state(self) -> RigidBodyState:
+        """Centre of mass, heading, velocities and yaw rate now (eq. 10-12)."""
+        return rigid_body_state(self.time, self.node_positions, self.node_velocities,
+                                self.model.mass, self.model.reference_pose, self._unwrap)
+
+    def set_velocity(self, forward: float = 0.0, lateral: float = 0.0, yaw_rate: float = 0.0,
+                     frame: str = 'body') -> None:
+        """Give every node the velocity of a rigid motion (paper eq. 13).
+
+        Parameters
+        ----------
+        forward, lateral : float
+            COM velocity [m/s]; in the robot frame (``frame='body'``: forward = x_frog,
+            lateral = y_frog to the left) or the world frame (``frame='world'``: x, y).
+        yaw_rate : float
+            [rad/s], counter-clockwise positive.
+        """
+        if frame not in ('body', 'world'):
+            raise ValueError(f"frame = {frame!r}, expected 'body' or 'world'")
+        v = np.array([forward, lateral], dtype=float)
+        if frame == 'body':
+            h = self.rigid_body_state().heading
+            c, s = np.cos(h), np.sin(h)
+            v = np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+        vel = nodal_velocities(self.node_positions, self.model.mass, v, yaw_rate)
+        self.integrator.v[:] = vel.ravel()
+
+    def set_pose(self, x: float, y: float, heading: float) -> None:
+        """Place the current shape rigidly with its COM at (x, y) [m] and heading [rad]."""
+        pos = self.node_positions
+        st = self.rigid_body_state()
+        c, s = np.cos(heading - st.heading), np.sin(heading - st.heading)
+        rot = np.array([[c, -s], [s, c]])
+        new = (pos - st.com) @ rot.T + np.array([x, y])
+        vel = self.node_velocities @ rot.T
+        self.integrator.x[:] = new.ravel()
+        self.integrator.v[:] = vel.ravel()
+        self._unwrap.reset(heading)
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, n_steps: int = 1) -> None:
+        """Advance ``n_steps`` time steps of ``time_step``.
+
+        Raises
+        ------
+        ConvergenceError
+            If a step fails even after step halving.
+        """
+        n_steps = int(n_steps)
+        if n_steps < 0:
+            raise ValueError(f'n_steps = {n_steps} must be >= 0')
+        self._sync_schedule(until=self.time + n_steps * self.time_step)
+        self.integrator.advance(n_steps, self.time_step)
+
+    def run(self, duration: float, record_interval: float = 0.01, progress: bool = False,
+            callback=None) -> Trajectory:
+        """Advance ``duration`` seconds and record samples every ``record_interval``.
+
+        Parameters
+        ----------
+        duration : float
+            [s] (rounded to whole steps).
+        record_interval : float
+            Sampling interval of the returned trajectory [s] (multiple of the step).
+        progress : bool
+            Show a tqdm progress bar.
+        callback : callable, optional
+            ``callback(sim)`` after each recorded sample.
+
+        Returns
+        -------
+        Trajectory
+            Includes the initial sample.
+        """
+        if not (np.isfinite(duration) and duration >= 0):
+            raise ValueError(f'duration = {duration!r} s must be >= 0')
+        n_total = int(round(duration / self.time_step))
+        stride = max(1, int(round(record_interval / self.time_step)))
+        samples = [self.rigid_body_state()]
+        positions = [self.node_positions]
+        bar = None
+        if progress:
+            from tqdm import tqdm
+            bar = tqdm(total=n_total * self.time_step, unit='sim s', desc='frog-sim',
+                       bar_format='{l_bar}{bar}| {n:.2f}/{total:.2f} sim s [{elapsed}<{remaining}]')
+        done = 0
+        while done < n_total:
+            k = min(stride, n_total - done)
+            self.step(k)
+            done += k
+            samples.append(self.rigid_body_state())
+            positions.append(self.node_positions)
+            if bar is not None:
+                bar.update(k * self.time_step)
+            if callback is not None:
+                callback(self)
+        if bar is not None:
+            bar.close()
+        return Trajectory.from_samples(samples, positions, self.metadata())
+
+    def metadata(self) -> dict:
+        """Parameters, profile, time step and code version (for output files)."""
+        from .. import __name__ as pkg  # noqa: F401
+        try:
+            from importlib.metadata import version
+            code_version = version('frog_sim')
+        except Exception:  # pragma: no cover - not installed as a distribution
+            code_version = 'unknown'
+        return {'params': self.params.as_dict(), 'time_step_s': self.time_step,
+                'profile': {'egain_vol_pct': self.profile.egain_vol_pct,
+                            'frequency_hz': self.profile.frequency_hz,
+                            'coefficients': list(self.profile.coefficients),
+                            'switch_time_s': self.profile.switch_time,
+                            'rms_error_per_m': self.profile.rms_error},
+                'gait': None if self._gait is None else {
+                    'frequency_hz': self._gait[0], 'phase_offset': self._gait[1],
+                    'start_s': self._gait[2], 'duration_s': self._gait[3]},
+                'n_nodes': self.model.n_nodes, 'code_version': code_version,
+                'units': {'time': 's', 'positions': 'm', 'velocity': 'm/s', 'heading': 'rad',
+                          'yaw_rate': 'rad/s'}}
