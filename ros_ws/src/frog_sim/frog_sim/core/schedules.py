@@ -48,10 +48,11 @@ def primitive_name(primitive) -> str:
 
 
 def primitive_limbs(primitive) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """Limbs fired by a primitive: (front limbs fired first, rear limbs fired one pulse later)."""
+    """Limbs fired by a primitive: (front limbs fired first, rear limbs one pulse later),
+    each in limb-id order (FL, FR / BL, BR)."""
     bits = PRIMITIVE_BITS[primitive_name(primitive)]
     fired = [limb for limb, bit in zip(PRIMITIVE_BIT_ORDER, bits) if bit == '1']
-    return (tuple(l for l in fired if l in FRONT_LIMBS), tuple(l for l in fired if l in REAR_LIMBS))
+    return (tuple(l for l in FRONT_LIMBS if l in fired), tuple(l for l in REAR_LIMBS if l in fired))
 
 
 @dataclass
