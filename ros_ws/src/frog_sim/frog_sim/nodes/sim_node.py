@@ -1,0 +1,327 @@
+"""``sim_node``: the frog simulator as a ROS 2 node (the digital twin's world).
+
+Runs :class:`frog_sim.core.simulation.FrogSimulation` paced against the wall clock
+(``real_time_factor``; 0 = as fast as possible), publishes the ground truth on
+``/frog/sim/odom`` (nav_msgs/Odometry: COM pose in ``tank``, body-frame twist in ``frog``)
+and the rod network on ``/frog/sim/shape`` (visualization_msgs/Marker, LINE_LIST), and
+executes primitives (``/frog/primitive``) and limb activations (``/frog/limb_activation``).
+With ``publish_clock`` it also publishes ``/clock`` (sim time) so other nodes can run with
+``use_sim_time`` faster than real time.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import signal
+import sys
+import time
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from rosgraph_msgs.msg import Clock
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker
+
+from frog_sim.core.model_parameters import FrogParameters
+from frog_sim.core.schedules import LIMB_NAMES, PRIMITIVE_NAMES
+from frog_sim.core.simulation import DEFAULT_TIME_STEP, ConvergenceError, FrogSimulation
+
+_NODE_PARAMS = [
+    # name, default, description
+    ("real_time_factor", 1.0, "simulated seconds per wall second; 0 = as fast as possible"),
+    ("publish_clock", False, "publish /clock with the simulated time (for use_sim_time nodes)"),
+    ("time_step", DEFAULT_TIME_STEP, "integrator time step dt [s]"),
+    ("odom_rate_hz", 50.0, "rate of /frog/sim/odom in simulated time [Hz]"),
+    ("shape_rate_hz", 10.0, "rate of /frog/sim/shape in simulated time [Hz]"),
+    ("odom_alias_topic", "", "also publish the ground truth here (e.g. /frog/odom for a "
+                             "vision-free loop); empty = off"),
+    ("world_frame", "tank", "frame of poses (REP-105 world/odom frame)"),
+    ("body_frame", "frog", "robot body frame, x forward"),
+    ("initial_x", 0.0, "initial centre-of-mass x [m]"),
+    ("initial_y", 0.0, "initial centre-of-mass y [m]"),
+    ("initial_heading", 0.0, "initial heading [rad]"),
+    ("gait_frequency_hz", 0.0, "swim a periodic gait at this frequency from the start "
+                               "(must be a measured frequency for the EGaIn ratio); 0 = no gait"),
+    ("gait_phase_offset", 0.5, "rear-pair delay as a fraction of the gait cycle, [0, 1)"),
+    ("gait_duration_s", 0.0, "stop the gait after this long [s]; 0 = forever"),
+    ("duration_s", 0.0, "stop simulating (keep publishing the last state) after this simulated "
+                        "time [s]; 0 = run forever"),
+]
+
+# Physical settings: every scalar field of FrogParameters becomes parameter "model.<field>".
+_MODEL_FIELDS = [f for f in dataclasses.fields(FrogParameters)
+                 if f.type in ("float", "int", "str", float, int, str)]
+
+
+def _descriptor(value, description):
+    ptype = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
+             float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}[type(value)]
+    return ParameterDescriptor(type=ptype, description=description, read_only=True)
+
+
+class ConfigurationError(ValueError):
+    """Parameters that make a simulation impossible (fatal at start-up)."""
+
+
+def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by ``yaw`` about z."""
+    return 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+
+
+class SimNode(Node):
+    """Frog simulator node; parameters in ``_NODE_PARAMS`` and ``model.*``."""
+
+    def __init__(self, **kwargs):
+        super().__init__("sim_node", **kwargs)
+        defaults = FrogParameters()
+        for name, default, desc in _NODE_PARAMS:
+            self.declare_parameter(name, default, _descriptor(default, desc))
+        for f in _MODEL_FIELDS:
+            value = getattr(defaults, f.name)
+            self.declare_parameter(f"model.{f.name}", value,
+                                   _descriptor(value, f"FrogParameters.{f.name} (SI; see "
+                                                      f"frog_sim/core/model_parameters.py)"))
+        p = {name: self.get_parameter(name).value for name, *_ in _NODE_PARAMS}
+        self.cfg = p
+        model = {f.name: self.get_parameter(f"model.{f.name}").value for f in _MODEL_FIELDS}
+        self._validate(p)
+        try:
+            params = defaults.replace(**model)
+            self.sim = FrogSimulation(params, time_step=p["time_step"])
+            self.sim.set_pose(p["initial_x"], p["initial_y"], p["initial_heading"])
+            if p["gait_frequency_hz"] > 0:
+                self.sim.set_gait(p["gait_frequency_hz"], p["gait_phase_offset"],
+                                  duration=p["gait_duration_s"] or None)
+        except (ValueError, TypeError) as exc:
+            raise ConfigurationError(str(exc)) from exc
+
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.odom_pub = self.create_publisher(Odometry, "/frog/sim/odom", qos)
+        self.alias_pub = (self.create_publisher(Odometry, p["odom_alias_topic"], qos)
+                          if p["odom_alias_topic"] else None)
+        self.shape_pub = self.create_publisher(Marker, "/frog/sim/shape", qos)
+        self.clock_pub = self.create_publisher(Clock, "/clock", 10) if p["publish_clock"] else None
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        from soft_robot_interfaces.msg import LimbActivation, Primitive
+        self.create_subscription(Primitive, "/frog/primitive", self.on_primitive, qos)
+        self.create_subscription(LimbActivation, "/frog/limb_activation", self.on_activation, qos)
+        self.create_service(Trigger, "~/reset", self.on_reset)
+
+        # Stamps: sim time when /clock is published, else wall time at start + sim time.
+        self.stamp_offset_ns = 0 if self.clock_pub else time.time_ns()
+        self.odom_period = 1.0 / p["odom_rate_hz"]
+        self.shape_period = 1.0 / p["shape_rate_hz"]
+        self.next_odom = 0.0
+        self.next_shape = 0.0
+        self.error: str | None = None
+        self.wall_start = time.monotonic()
+        self.sim_start = self.sim.time
+        self.steps_total = 0
+        self.step_wall_s = 0.0
+        self.create_timer(0.01, self.tick)
+        self.create_timer(1.0, self.publish_diagnostics)
+        self.publish_state(force=True)
+        self.get_logger().info(
+            f"simulating the frog ({self.sim.model.n_nodes} nodes, EGaIn "
+            f"{params.egain_vol_pct:g} %, dt {self.sim.time_step * 1e3:g} ms, real-time factor "
+            f"{p['real_time_factor']:g}{', gait %.2f Hz' % p['gait_frequency_hz'] if p['gait_frequency_hz'] else ''})")
+
+    @staticmethod
+    def _validate(p: dict) -> None:
+        checks = [
+            ("real_time_factor", p["real_time_factor"] >= 0, ">= 0"),
+            ("time_step", 0 < p["time_step"] <= 0.01, "in (0, 0.01] s"),
+            ("odom_rate_hz", 0 < p["odom_rate_hz"] <= 1000, "in (0, 1000] Hz"),
+            ("shape_rate_hz", 0 < p["shape_rate_hz"] <= 200, "in (0, 200] Hz"),
+            ("gait_frequency_hz", p["gait_frequency_hz"] >= 0, ">= 0"),
+            ("gait_phase_offset", 0 <= p["gait_phase_offset"] < 1, "in [0, 1)"),
+            ("gait_duration_s", p["gait_duration_s"] >= 0, ">= 0"),
+            ("duration_s", p["duration_s"] >= 0, ">= 0"),
+        ]
+        for name, ok, expected in checks:
+            if not ok or (isinstance(p[name], float) and not math.isfinite(p[name])):
+                raise ConfigurationError(f"parameter {name} = {p[name]!r} must be {expected}")
+        for name in ("initial_x", "initial_y", "initial_heading"):
+            if not math.isfinite(p[name]):
+                raise ConfigurationError(f"parameter {name} = {p[name]!r} must be finite")
+
+    # -- simulation loop -----------------------------------------------------------------
+    def _target_time(self) -> float:
+        rtf = self.cfg["real_time_factor"]
+        if rtf == 0:
+            return math.inf
+        return self.sim_start + (time.monotonic() - self.wall_start) * rtf
+
+    def tick(self) -> None:
+        if self.error is not None:
+            return
+        end = self.cfg["duration_s"] or math.inf
+        target = min(self._target_time(), end)
+        budget_end = time.monotonic() + 0.05   # keep callbacks (commands) responsive
+        dt = self.sim.time_step
+        while self.sim.time + 0.5 * dt < target and time.monotonic() < budget_end:
+            # advance to the next publication time, at most to the target
+            next_pub = min(self.next_odom, self.next_shape, target)
+            n = max(1, int(round((next_pub - self.sim.time) / dt)))
+            t0 = time.perf_counter()
+            try:
+                self.sim.step(n)
+            except ConvergenceError as exc:
+                self.error = f"simulation stopped at t = {self.sim.time:.3f} s: {exc}"
+                self.get_logger().error(self.error + " (call ~/reset to start again)")
+                return
+            self.step_wall_s += time.perf_counter() - t0
+            self.steps_total += n
+            self.publish_state()
+
+    def _stamp(self) -> Time:
+        ns = self.stamp_offset_ns + int(round(self.sim.time * 1e9))
+        sec, nanosec = divmod(ns, 1_000_000_000)
+        return Time(sec=sec, nanosec=nanosec)
+
+    def publish_state(self, force: bool = False) -> None:
+        t = self.sim.time
+        if self.clock_pub is not None:
+            clock = Clock()
+            clock.clock = self._stamp()
+            self.clock_pub.publish(clock)
+        if force or t + 1e-9 >= self.next_odom:
+            self.next_odom = t + self.odom_period
+            self.publish_odom()
+        if force or t + 1e-9 >= self.next_shape:
+            self.next_shape = t + self.shape_period
+            self.publish_shape()
+
+    def publish_odom(self) -> None:
+        s = self.sim.rigid_body_state()
+        msg = Odometry()
+        msg.header.stamp = self._stamp()
+        msg.header.frame_id = self.cfg["world_frame"]
+        msg.child_frame_id = self.cfg["body_frame"]
+        msg.pose.pose.position.x, msg.pose.pose.position.y = float(s.com[0]), float(s.com[1])
+        (msg.pose.pose.orientation.x, msg.pose.pose.orientation.y, msg.pose.pose.orientation.z,
+         msg.pose.pose.orientation.w) = yaw_to_quaternion(float(s.heading))
+        forward, lateral = (float(v) for v in s.body_velocity)
+        # REP-105: twist is expressed in the child (body) frame
+        msg.twist.twist.linear.x, msg.twist.twist.linear.y = forward, lateral
+        msg.twist.twist.angular.z = float(s.yaw_rate)
+        self.odom_pub.publish(msg)
+        if self.alias_pub is not None:
+            self.alias_pub.publish(msg)
+
+    def publish_shape(self) -> None:
+        pos = self.sim.node_positions
+        edges = self.sim.model.network.edges
+        msg = Marker()
+        msg.header.stamp = self._stamp()
+        msg.header.frame_id = self.cfg["world_frame"]
+        msg.ns, msg.id = "frog_rods", 0
+        msg.type, msg.action = Marker.LINE_LIST, Marker.ADD
+        msg.pose.orientation.w = 1.0
+        msg.scale.x = 0.002                      # line width [m]
+        msg.color.r, msg.color.g, msg.color.b, msg.color.a = 0.1, 0.6, 0.2, 1.0
+        ends = pos[edges.ravel()]
+        msg.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in ends]
+        self.shape_pub.publish(msg)
+
+    # -- commands ------------------------------------------------------------------------
+    def on_primitive(self, msg) -> None:
+        if msg.id >= len(PRIMITIVE_NAMES):
+            self.get_logger().error(f"rejected primitive id {msg.id}: out of range 0-8")
+            return
+        name = PRIMITIVE_NAMES[msg.id]
+        if msg.name and msg.name.strip().upper() != name:
+            self.get_logger().error(f"rejected primitive: id {msg.id} is {name!r} but the "
+                                    f"message names {msg.name!r}")
+            return
+        if self.error is None:
+            self.sim.execute_primitive(name)
+            self.get_logger().info(f"primitive {name} at t = {self.sim.time:.3f} s")
+
+    def on_activation(self, msg) -> None:
+        limbs = list(msg.limbs)
+        if any(i >= len(LIMB_NAMES) for i in limbs) or len(set(limbs)) != len(limbs):
+            self.get_logger().error(f"rejected limb activation {limbs}: ids must be distinct "
+                                    f"and in 0-3 (FL 0, FR 1, BL 2, BR 3)")
+            return
+        if not (math.isfinite(msg.pulse_duration) and 0 <= msg.pulse_duration <= 1.0):
+            self.get_logger().error(f"rejected limb activation: pulse_duration "
+                                    f"{msg.pulse_duration!r} s must be in [0, 1]")
+            return
+        if limbs and self.error is None:
+            # The measured curvature profile already contains the hardware pulse.
+            self.sim.fire_limbs([LIMB_NAMES[i] for i in limbs])
+
+    def on_reset(self, request, response):
+        p = self.cfg
+        self.sim.reset()
+        self.sim.set_pose(p["initial_x"], p["initial_y"], p["initial_heading"])
+        if p["gait_frequency_hz"] > 0:
+            self.sim.set_gait(p["gait_frequency_hz"], p["gait_phase_offset"],
+                              duration=p["gait_duration_s"] or None)
+        self.error = None
+        self.next_odom = self.next_shape = 0.0
+        self.wall_start, self.sim_start = time.monotonic(), self.sim.time
+        self.publish_state(force=True)
+        response.success, response.message = True, "simulation reset to the initial pose"
+        return response
+
+    def publish_diagnostics(self) -> None:
+        wall = time.monotonic() - self.wall_start
+        sim_elapsed = self.sim.time - self.sim_start
+        status = DiagnosticStatus(
+            name=f"{self.get_name()}: simulation", hardware_id="frog_sim",
+            level=DiagnosticStatus.ERROR if self.error else DiagnosticStatus.OK,
+            message=self.error or "running")
+        cost = self.step_wall_s / sim_elapsed if sim_elapsed > 0 else float("nan")
+        status.values = [
+            KeyValue(key="sim_time_s", value=f"{self.sim.time:.3f}"),
+            KeyValue(key="achieved_real_time_factor",
+                     value=f"{sim_elapsed / wall:.2f}" if wall > 0 else "nan"),
+            KeyValue(key="compute_real_time_factor",
+                     value=f"{1 / cost:.1f}" if cost > 0 else "nan"),
+            KeyValue(key="steps", value=str(self.steps_total)),
+        ]
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self._stamp()
+        self.diag_pub.publish(msg)
+
+
+def _raise_keyboard_interrupt(signum, frame):
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def main(args=None) -> int:
+    signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
+    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        node = SimNode()
+        rclpy.spin(node)
+    except (ConfigurationError, ParameterException) as exc:
+        print(f"[sim_node] fatal configuration error: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

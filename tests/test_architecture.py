@@ -1,0 +1,108 @@
+"""Workspace rules that keep the packages usable on a real ROS 2 install and without ROS.
+
+- every Python package has package.xml (format 3, ament_python), setup.cfg installing
+  scripts into lib/<pkg>, the ament resource marker, a core/ and a nodes/ subpackage;
+- core modules import neither rclpy nor another package of ours (cores meet only through
+  messages and files), checked statically and by importing them with rclpy blocked;
+- every console script is installed where `ros2 run` looks and its function exists.
+"""
+
+import ast
+import configparser
+import importlib
+import re
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "ros_ws" / "src"
+INSTALL = SRC.parent / "install"
+PY_PACKAGES = sorted(p.name for p in SRC.iterdir() if (p / "setup.py").is_file())
+OURS = set(PY_PACKAGES) | {"soft_robot_interfaces"}
+
+
+def test_expected_packages_exist():
+    assert set(PY_PACKAGES) == {"frog_sim", "frog_planner", "frog_vision", "frog_bridge",
+                                "softkin_fk", "frog_logger"}
+    assert (SRC / "soft_robot_interfaces" / "CMakeLists.txt").is_file()
+
+
+@pytest.mark.parametrize("pkg", PY_PACKAGES)
+def test_package_layout(pkg):
+    root = SRC / pkg
+    xml = ET.parse(root / "package.xml").getroot()
+    assert xml.get("format") == "3"
+    assert xml.findtext("name") == pkg
+    assert xml.find("export/build_type").text == "ament_python"
+    assert xml.findall("exec_depend"), "package.xml lists no run dependencies"
+    cfg = configparser.ConfigParser()
+    cfg.read(root / "setup.cfg")
+    assert cfg["install"]["install_scripts"] == f"$base/lib/{pkg}"
+    assert cfg["develop"]["script_dir"] == f"$base/lib/{pkg}"
+    assert (root / "resource" / pkg).is_file()
+    for sub in ("core", "nodes"):
+        assert (root / pkg / sub / "__init__.py").is_file()
+    assert (root / "test").is_dir()
+
+
+def _imports(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+@pytest.mark.parametrize("pkg", PY_PACKAGES)
+def test_core_imports_no_ros_and_no_other_package(pkg):
+    core = SRC / pkg / pkg / "core"
+    bad = {}
+    for path in core.rglob("*.py"):
+        names = _imports(path)
+        ros = {n for n in names if n in ("rclpy", "rosidl_runtime_py", "rosbag2_py")
+               or n.endswith("_msgs") or n.endswith("_srvs")}
+        others = (names & OURS) - {pkg}
+        if ros or others:
+            bad[str(path.relative_to(SRC))] = sorted(ros | others)
+    assert not bad, f"core modules importing ROS or another package's code: {bad}"
+
+
+BLOCKER = """
+import importlib.abc, sys
+class Block(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name.split('.')[0] in ('rclpy',):
+            raise ImportError('core imported ' + name)
+sys.meta_path.insert(0, Block())
+import importlib, pkgutil
+import {pkg}.core as core
+for m in pkgutil.walk_packages(core.__path__, '{pkg}.core.'):
+    importlib.import_module(m.name)
+print('ok')
+"""
+
+
+@pytest.mark.parametrize("pkg", PY_PACKAGES)
+def test_core_imports_without_rclpy(pkg):
+    r = subprocess.run([sys.executable, "-c", BLOCKER.format(pkg=pkg)], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0 and r.stdout.strip().endswith("ok"), r.stderr[-3000:]
+
+
+def _console_scripts(pkg):
+    text = (SRC / pkg / "setup.py").read_text()
+    return re.findall(r"'([\w-]+)\s*=\s*([\w.]+):(\w+)'", text)
+
+
+@pytest.mark.parametrize("pkg", PY_PACKAGES)
+def test_console_scripts_installed_and_resolvable(pkg):
+    for exe, module, func in _console_scripts(pkg):
+        assert (INSTALL / pkg / "lib" / pkg / exe).is_file(), \
+            f"{exe} not installed in install/{pkg}/lib/{pkg} (run colcon build)"
+        assert callable(getattr(importlib.import_module(module), func))
