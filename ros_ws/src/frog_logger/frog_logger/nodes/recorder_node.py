@@ -47,8 +47,11 @@ _PARAMS = [
      "close the open chunk this often [s]: the most a SIGKILL can lose"),
     ("discovery_period_s", 0.5, ParameterType.PARAMETER_DOUBLE,
      "how often to look for new topics and publishers [s]"),
+    ("history", "keep_all", ParameterType.PARAMETER_STRING,
+     "subscription history: keep_all (DDS buffers a backlog without loss while the "
+     "recorder is busy) or keep_last (bounded by queue_depth; old messages dropped)"),
     ("queue_depth", 1000, ParameterType.PARAMETER_INTEGER,
-     "subscription history depth per topic (reliable topics buffer this many messages)"),
+     "subscription history depth per topic with history keep_last"),
     ("retry_period_s", 5.0, ParameterType.PARAMETER_DOUBLE,
      "after a write error (disk full), try a new file this often [s]"),
 ]
@@ -122,6 +125,8 @@ class RecorderNode(Node):
         self.include_hidden = p["include_hidden"]
         self.exclude = re.compile(p["exclude_regex"]) if p["exclude_regex"] else None
         self.queue_depth = p["queue_depth"]
+        self.history = (HistoryPolicy.KEEP_ALL if p["history"] == "keep_all"
+                        else HistoryPolicy.KEEP_LAST)
         prefix = p["file_prefix"] or time.strftime("rec_%Y%m%d_%H%M%S")
         try:
             self.recording = Recording(
@@ -165,6 +170,9 @@ class RecorderNode(Node):
                 raise ConfigurationError(f"parameter {key} must be >= 0, got {p[key]}")
         if p["queue_depth"] < 1:
             raise ConfigurationError(f"parameter queue_depth must be >= 1, got {p['queue_depth']}")
+        if p["history"] not in ("keep_all", "keep_last"):
+            raise ConfigurationError(
+                f"parameter history must be keep_all or keep_last, got {p['history']!r}")
         if p["compression"] not in ("zstd", "lz4", "none"):
             raise ConfigurationError(
                 f"parameter compression must be zstd, lz4 or none, got {p['compression']!r}")
@@ -210,7 +218,7 @@ class RecorderNode(Node):
         reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
         latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
         qos = QoSProfile(
-            history=HistoryPolicy.KEEP_LAST, depth=self.queue_depth,
+            history=self.history, depth=self.queue_depth,
             reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
         self.recording.add_topic(topic, type_name, definition,
