@@ -124,7 +124,6 @@ def analyse(mcap: Path, out: Path, args) -> dict:
 
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), gridspec_kw={"width_ratios": [1.3, 1]})
     ax = axes[0]
-    t0_shape = shapes[0][0] if shapes else 0.0
     every = max(1, len(shapes) // 8)
     for k, (ts, pts) in enumerate(shapes[::every]):
         seg = pts.reshape(-1, 2, 2)

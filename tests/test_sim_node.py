@@ -1,7 +1,6 @@
 """sim_node as a real process: publishes ground truth, executes primitives, rejects bad input."""
 
 import math
-import time
 
 import pytest
 from nav_msgs.msg import Odometry

@@ -1,1 +1,3 @@
-"""Serial (UART to nRF52 BLE relay) link to the frog robot, and a robot emulator for the digital twin."""
+"""Serial (UART to nRF52 BLE relay) link to the frog robot, and a robot emulator for the digital
+twin.
+"""

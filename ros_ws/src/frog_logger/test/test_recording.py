@@ -1,7 +1,6 @@
 """Recording: split files, refuse overwrite, write errors, recovery of truncated files."""
 
 import errno
-import os
 
 import pytest
 from mcap.reader import make_reader

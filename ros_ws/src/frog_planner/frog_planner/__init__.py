@@ -1,1 +1,3 @@
-"""Library-backed receding-horizon path-following planner for the frog robot (seed 000, Algorithm 1)."""
+"""Library-backed receding-horizon path-following planner for the frog robot (seed 000, Algorithm
+1).
+"""

@@ -1,1 +1,3 @@
-"""AprilTag tracking of the frog robot from an overhead camera: camera model, detection, pose and velocity estimation."""
+"""AprilTag tracking of the frog robot from an overhead camera: camera model, detection, pose and
+velocity estimation.
+"""
