@@ -81,3 +81,35 @@ def test_bending_energy_matches_definition():
     kappa = discrete_curvature(x.reshape(-1, 2), net.bends, net.bend_length)
     expected = np.sum(0.5 * net.bend_stiffness * (kappa - net.bend_natural_curvature) ** 2 * net.bend_length)
     assert energy == pytest.approx(expected, rel=1e-12)
+
+
+def test_drag_jacobian_matches_central_differences():
+    """Drag force derivatives w.r.t. node velocities and positions (used by Newton, eq. 8)."""
+    from frog_sim.core.fluid import drag_element
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        xs = rng.normal(size=4) * 0.004
+        vs = rng.normal(size=4) * 0.05
+        cn, ct = 0.3, 0.004
+        f = np.empty(4)
+        jv = np.empty((4, 4))
+        jx = np.empty((4, 4))
+        drag_element(*xs, *vs, cn, ct, f, jv, jx)
+        jv_fd = np.empty((4, 4))
+        jx_fd = np.empty((4, 4))
+        fp, fm = np.empty(4), np.empty(4)
+        dummy = np.empty((4, 4))
+        for k in range(4):
+            for arr, out, hstep in ((vs, jv_fd, 1e-7), (xs, jx_fd, 1e-9)):
+                plus, minus = arr.copy(), arr.copy()
+                plus[k] += hstep
+                minus[k] -= hstep
+                if arr is vs:
+                    drag_element(*xs, *plus, cn, ct, fp, dummy, dummy.copy())
+                    drag_element(*xs, *minus, cn, ct, fm, dummy, dummy.copy())
+                else:
+                    drag_element(*plus, *vs, cn, ct, fp, dummy, dummy.copy())
+                    drag_element(*minus, *vs, cn, ct, fm, dummy, dummy.copy())
+                out[:, k] = (fp - fm) / (2 * hstep)
+        assert np.linalg.norm(jv - jv_fd) / np.linalg.norm(jv) < 1e-6
+        assert np.linalg.norm(jx - jx_fd) / np.linalg.norm(jx) < 1e-6

@@ -119,6 +119,15 @@ def test_simulation_api_starts_from_given_body_velocity(library):
     assert np.all(np.isfinite(sim.node_positions))
 
 
+def test_pose_survives_choosing_a_gait(library):
+    sim = FrogSimulation(library=library)
+    sim.set_pose(1.0, 2.0, 0.5)
+    sim.set_gait(0.8, 0.5)          # picks another profile (may rebuild the model at t = 0)
+    st = sim.rigid_body_state()
+    assert np.allclose(st.com, [1.0, 2.0]) and st.heading == pytest.approx(0.5)
+    assert sim.profile.frequency_hz == 0.8
+
+
 def test_primitive_fires_front_then_rear(library):
     sim = FrogSimulation(library=library)
     sim.execute_primitive('B')

@@ -42,60 +42,76 @@ def stretch_element(xa0, xa1, xb0, xb1, rest_length, ea, grad, hess):
     k00 = a * t0 * t0 + b * (1.0 - t0 * t0)
     k01 = a * t0 * t1 - b * t0 * t1
     k11 = a * t1 * t1 + b * (1.0 - t1 * t1)
-    kk = np.empty((2, 2))
-    kk[0, 0] = k00
-    kk[0, 1] = k01
-    kk[1, 0] = k01
-    kk[1, 1] = k11
     for p in range(2):
         for q in range(2):
-            hess[p, q] = kk[p, q]
-            hess[p + 2, q + 2] = kk[p, q]
-            hess[p, q + 2] = -kk[p, q]
-            hess[p + 2, q] = -kk[p, q]
+            kpq = k00 if p + q == 0 else (k11 if p + q == 2 else k01)
+            hess[p, q] = kpq
+            hess[p + 2, q + 2] = kpq
+            hess[p, q + 2] = -kpq
+            hess[p + 2, q] = -kpq
     return energy
 
 
+@njit(cache=True, inline='always')
+def _d2c(p, q):
+    """Second derivative of c = e1 x e2 w.r.t. u = (e1, e2) (constant)."""
+    if (p == 0 and q == 3) or (p == 3 and q == 0):
+        return 1.0
+    if (p == 1 and q == 2) or (p == 2 and q == 1):
+        return -1.0
+    return 0.0
+
+
 @njit(cache=True, fastmath=False)
-def bend_element(xa0, xa1, xb0, xb1, xc0, xc1, dl, ei, kappa0, grad, hess):
-    """Energy of one bending triple; writes gradient (6,) and Hessian (6, 6).
+def bend_element(xa0, xa1, xb0, xb1, xc0, xc1, dl, ei, kappa0, grad, hess, work, want_hess=True):
+    """Energy of one bending triple; writes gradient (6,) and (if ``want_hess``) Hessian (6, 6).
 
     Degrees of freedom are ordered (xa, ya, xb, yb, xc, yc) with b the middle node.
+    ``work`` is a scratch array of shape (3, 4, 4) (no allocation in the hot loop).
     """
-    u = np.empty(4)
-    u[0] = xb0 - xa0
-    u[1] = xb1 - xa1
-    u[2] = xc0 - xb0
-    u[3] = xc1 - xb1
-    n1 = np.sqrt(u[0] * u[0] + u[1] * u[1])
-    n2 = np.sqrt(u[2] * u[2] + u[3] * u[3])
-    c = u[0] * u[3] - u[1] * u[2]
-    dd = n1 * n2 + u[0] * u[2] + u[1] * u[3]
+    u0 = xb0 - xa0
+    u1 = xb1 - xa1
+    u2 = xc0 - xb0
+    u3 = xc1 - xb1
+    n1 = np.sqrt(u0 * u0 + u1 * u1)
+    n2 = np.sqrt(u2 * u2 + u3 * u3)
+    c = u0 * u3 - u1 * u2
+    dd = n1 * n2 + u0 * u2 + u1 * u3
     kappa = 2.0 * c / (dd * dl)
     diff = kappa - kappa0
     energy = 0.5 * ei * diff * diff * dl
-    # first derivatives of c and D w.r.t. u = (e1, e2)
-    dc = np.empty(4)
-    dc[0] = u[3]
-    dc[1] = -u[2]
-    dc[2] = -u[1]
-    dc[3] = u[0]
-    t1x = u[0] / n1
-    t1y = u[1] / n1
-    t2x = u[2] / n2
-    t2y = u[3] / n2
-    dD = np.empty(4)
-    dD[0] = n2 * t1x + u[2]
-    dD[1] = n2 * t1y + u[3]
-    dD[2] = n1 * t2x + u[0]
-    dD[3] = n1 * t2y + u[1]
-    # second derivatives
-    d2c = np.zeros((4, 4))
-    d2c[0, 3] = 1.0
-    d2c[3, 0] = 1.0
-    d2c[1, 2] = -1.0
-    d2c[2, 1] = -1.0
-    d2D = np.empty((4, 4))
+    vec = work[0]          # rows: dc, dD, dk, gu
+    dc = vec[0]
+    dD = vec[1]
+    dk = vec[2]
+    gu = vec[3]
+    dc[0] = u3
+    dc[1] = -u2
+    dc[2] = -u1
+    dc[3] = u0
+    t1x = u0 / n1
+    t1y = u1 / n1
+    t2x = u2 / n2
+    t2y = u3 / n2
+    dD[0] = n2 * t1x + u2
+    dD[1] = n2 * t1y + u3
+    dD[2] = n1 * t2x + u0
+    dD[3] = n1 * t2y + u1
+    s = 2.0 / dl
+    inv = 1.0 / dd
+    w = ei * dl
+    for p in range(4):
+        dk[p] = s * (dc[p] * inv - c * dD[p] * inv * inv)
+        gu[p] = w * diff * dk[p]
+    # chain rule: e1 = xb - xa, e2 = xc - xb
+    for comp in range(2):
+        grad[comp] = -gu[comp]
+        grad[2 + comp] = gu[comp] - gu[2 + comp]
+        grad[4 + comp] = gu[2 + comp]
+    if not want_hess:
+        return energy
+    d2D = work[1]
+    hu = work[2]
     r12 = n2 / n1
     r21 = n1 / n2
     d2D[0, 0] = r12 * (1.0 - t1x * t1x)
@@ -114,34 +130,17 @@ def bend_element(xa0, xa1, xb0, xb1, xc0, xc1, dl, ei, kappa0, grad, hess):
     d2D[3, 0] = d2D[0, 3]
     d2D[2, 1] = d2D[1, 2]
     d2D[3, 1] = d2D[1, 3]
-    # kappa = s * c / D with s = 2 / dl
-    s = 2.0 / dl
-    inv = 1.0 / dd
-    dk = np.empty(4)
+    inv2 = inv * inv
+    inv3 = inv2 * inv
     for p in range(4):
-        dk[p] = s * (dc[p] * inv - c * dD[p] * inv * inv)
-    d2k = np.empty((4, 4))
-    for p in range(4):
-        for q in range(4):
-            d2k[p, q] = s * (d2c[p, q] * inv
-                             - (dc[p] * dD[q] + dD[p] * dc[q]) * inv * inv
-                             + 2.0 * c * dD[p] * dD[q] * inv * inv * inv
-                             - c * d2D[p, q] * inv * inv)
-    # energy derivatives w.r.t. u
-    w = ei * dl
-    gu = np.empty(4)
-    for p in range(4):
-        gu[p] = w * diff * dk[p]
-    hu = np.empty((4, 4))
-    for p in range(4):
-        for q in range(4):
-            hu[p, q] = w * (dk[p] * dk[q] + diff * d2k[p, q])
-    # chain rule: e1 = xb - xa, e2 = xc - xb  -> B (4 x 6)
-    # x-DOF k (0..5) maps to u with coefficients: xa: -e1, xb: +e1 -e2, xc: +e2
-    for comp in range(2):
-        grad[comp] = -gu[comp]
-        grad[2 + comp] = gu[comp] - gu[2 + comp]
-        grad[4 + comp] = gu[2 + comp]
+        for q in range(p, 4):
+            d2k = s * (_d2c(p, q) * inv
+                       - (dc[p] * dD[q] + dD[p] * dc[q]) * inv2
+                       + 2.0 * c * dD[p] * dD[q] * inv3
+                       - c * d2D[p, q] * inv2)
+            val = w * (dk[p] * dk[q] + diff * d2k)
+            hu[p, q] = val
+            hu[q, p] = val
     # H_x = B^T H_u B, done blockwise on 2x2 blocks
     for p in range(2):
         for q in range(2):
@@ -170,6 +169,7 @@ def elastic_energy_gradient(x, edges, rest_length, ea, bends, bend_length, ei, k
     h4 = np.empty((4, 4))
     g6 = np.empty(6)
     h6 = np.empty((6, 6))
+    work = np.empty((3, 4, 4))
     energy = 0.0
     for m in range(edges.shape[0]):
         a = edges[m, 0]
@@ -185,7 +185,7 @@ def elastic_energy_gradient(x, edges, rest_length, ea, bends, bend_length, ei, k
         j = bends[m, 1]
         k = bends[m, 2]
         energy += bend_element(x[2 * i], x[2 * i + 1], x[2 * j], x[2 * j + 1], x[2 * k],
-                               x[2 * k + 1], bend_length[m], ei[m], kappa0[m], g6, h6)
+                               x[2 * k + 1], bend_length[m], ei[m], kappa0[m], g6, h6, work, False)
         grad_out[2 * i] += g6[0]
         grad_out[2 * i + 1] += g6[1]
         grad_out[2 * j] += g6[2]
@@ -205,6 +205,7 @@ def elastic_hessian_dense(x, edges, rest_length, ea, bends, bend_length, ei, kap
     h6 = np.empty((6, 6))
     dof4 = np.empty(4, dtype=np.int64)
     dof6 = np.empty(6, dtype=np.int64)
+    work = np.empty((3, 4, 4))
     for m in range(edges.shape[0]):
         a = edges[m, 0]
         b = edges[m, 1]
@@ -222,7 +223,7 @@ def elastic_hessian_dense(x, edges, rest_length, ea, bends, bend_length, ei, kap
             dof6[2 * r] = 2 * bends[m, r]
             dof6[2 * r + 1] = 2 * bends[m, r] + 1
         bend_element(x[dof6[0]], x[dof6[1]], x[dof6[2]], x[dof6[3]], x[dof6[4]], x[dof6[5]],
-                     bend_length[m], ei[m], kappa0[m], g6, h6)
+                     bend_length[m], ei[m], kappa0[m], g6, h6, work, True)
         for p in range(6):
             for q in range(6):
                 hess_out[dof6[p], dof6[q]] += h6[p, q]

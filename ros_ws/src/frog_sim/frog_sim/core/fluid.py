@@ -68,12 +68,14 @@ def lumped_masses(network, fluid_density: float, added_mass_coefficient: float) 
 
 
 @njit(cache=True)
-def drag_element(xa0, xa1, xb0, xb1, va0, va1, vb0, vb1, cn, ct, force, dfdv, dfdx):
+def drag_element(xa0, xa1, xb0, xb1, va0, va1, vb0, vb1, cn, ct, force, dfdv, dfdx,
+                 want_jacobian=True):
     """Drag on one edge, lumped to its nodes.
 
-    Writes ``force`` (4,) [N] on (xa, ya, xb, yb), ``dfdv`` (4, 4) [N s/m] and
-    ``dfdx`` (4, 4) [N/m] (derivatives of that force w.r.t. node velocities and
-    positions). ``cn``/``ct`` are 1/2 rho C D dl for the normal/tangent direction.
+    Writes ``force`` (4,) [N] on (xa, ya, xb, yb) and, if ``want_jacobian``, ``dfdv``
+    (4, 4) [N s/m] and ``dfdx`` (4, 4) [N/m] (derivatives of that force w.r.t. node
+    velocities and positions). ``cn``/``ct`` are 1/2 rho C D dl for the normal/tangent
+    direction.
     """
     e0 = xb0 - xa0
     e1 = xb1 - xa1
@@ -85,55 +87,49 @@ def drag_element(xa0, xa1, xb0, xb1, va0, va1, vb0, vb1, cn, ct, force, dfdv, df
     speed = np.sqrt(v0 * v0 + v1 * v1)
     vt = t0 * v0 + t1 * v1
     dc = ct - cn
-    # f = -|v| (cn v + (ct - cn) t (t.v))
+    # f = -|v| (cn v + (ct - cn) t (t.v))          (eq. 1-2)
     f0 = -speed * (cn * v0 + dc * t0 * vt)
     f1 = -speed * (cn * v1 + dc * t1 * vt)
     force[0] = 0.5 * f0
     force[1] = 0.5 * f1
     force[2] = 0.5 * f0
     force[3] = 0.5 * f1
+    if not want_jacobian:
+        return
     # df/dv_mid = -[cn (|v| I + v v^T/|v|) + dc (|v| t t^T + t (t.v) v^T/|v|)]
-    g = np.zeros((2, 2))
-    v = np.empty(2)
-    t = np.empty(2)
-    v[0] = v0
-    v[1] = v1
-    t[0] = t0
-    t[1] = t1
     inv_speed = 1.0 / speed if speed > 1e-300 else 0.0
-    for p in range(2):
-        for q in range(2):
-            eye = 1.0 if p == q else 0.0
-            g[p, q] = -(cn * (speed * eye + v[p] * v[q] * inv_speed)
-                        + dc * (speed * t[p] * t[q] + t[p] * vt * v[q] * inv_speed))
+    g00 = -(cn * (speed + v0 * v0 * inv_speed) + dc * (speed * t0 * t0 + t0 * vt * v0 * inv_speed))
+    g01 = -(cn * (v0 * v1 * inv_speed) + dc * (speed * t0 * t1 + t0 * vt * v1 * inv_speed))
+    g10 = -(cn * (v1 * v0 * inv_speed) + dc * (speed * t1 * t0 + t1 * vt * v0 * inv_speed))
+    g11 = -(cn * (speed + v1 * v1 * inv_speed) + dc * (speed * t1 * t1 + t1 * vt * v1 * inv_speed))
     # df/de = -|v| dc [(t.v) I + t v^T] P / l,  P = I - t t^T
-    a = np.empty((2, 2))
-    for p in range(2):
-        for q in range(2):
-            eye = 1.0 if p == q else 0.0
-            a[p, q] = vt * eye + t[p] * v[q]
-    pm = np.empty((2, 2))
-    for p in range(2):
-        for q in range(2):
-            eye = 1.0 if p == q else 0.0
-            pm[p, q] = eye - t[p] * t[q]
-    ge = np.zeros((2, 2))
-    for p in range(2):
-        for q in range(2):
-            acc = 0.0
-            for r in range(2):
-                acc += a[p, r] * pm[r, q]
-            ge[p, q] = -speed * dc * acc / length
-    # node force = 0.5 f ; v_mid = 0.5 (va + vb) ; e = xb - xa
-    for p in range(2):
-        for q in range(2):
-            gv = 0.25 * g[p, q]
-            gx = 0.5 * ge[p, q]
-            for r in range(2):
-                dfdv[2 * r + p, q] = gv
-                dfdv[2 * r + p, 2 + q] = gv
-                dfdx[2 * r + p, q] = -gx
-                dfdx[2 * r + p, 2 + q] = gx
+    a00 = vt + t0 * v0
+    a01 = t0 * v1
+    a10 = t1 * v0
+    a11 = vt + t1 * v1
+    p00 = 1.0 - t0 * t0
+    p01 = -t0 * t1
+    p11 = 1.0 - t1 * t1
+    k = -speed * dc / length
+    ge00 = k * (a00 * p00 + a01 * p01)
+    ge01 = k * (a00 * p01 + a01 * p11)
+    ge10 = k * (a10 * p00 + a11 * p01)
+    ge11 = k * (a10 * p01 + a11 * p11)
+    # node force = f/2 ; v_mid = (va + vb)/2 ; e = xb - xa
+    for r in range(2):
+        o = 2 * r
+        dfdv[o, 0] = 0.25 * g00
+        dfdv[o, 1] = 0.25 * g01
+        dfdv[o + 1, 0] = 0.25 * g10
+        dfdv[o + 1, 1] = 0.25 * g11
+        dfdx[o, 0] = -0.5 * ge00
+        dfdx[o, 1] = -0.5 * ge01
+        dfdx[o + 1, 0] = -0.5 * ge10
+        dfdx[o + 1, 1] = -0.5 * ge11
+        for p in range(2):
+            for q in range(2):
+                dfdv[o + p, 2 + q] = dfdv[o + p, q]
+                dfdx[o + p, 2 + q] = -dfdx[o + p, q]
 
 
 @njit(cache=True)

@@ -15,9 +15,9 @@ retried as two half steps, recursively up to ``max_halvings`` times; if that fai
 :class:`ConvergenceError` names the time, step size and residual. A step never
 returns NaN or an unconverged state.
 
-The whole loop (actuation update, assembly, banded LU, Newton, state update) runs in
+The whole loop (actuation update, assembly, sparse LU, Newton, state update) runs in
 numba for speed; a SuperLU (scipy.sparse CSR) path is used when the pivot test of the
-unpivoted band LU fails, or on request (``solver='sparse'``).
+unpivoted numba sparse LU fails, or on request (``solver='superlu'``).
 """
 from __future__ import annotations
 
@@ -30,14 +30,14 @@ from numba import njit
 from .actuation import ActuatorArrays, apply_actuation
 from .elastic_energy import bend_element, stretch_element
 from .fluid import drag_element, drag_prefactors
-from .linear_algebra import band_lu_solve, build_jacobian_pattern
+from .linear_algebra import build_jacobian_pattern, sparse_lu_factor, sparse_lu_substitute
 
 STATUS_OK = 0
 STATUS_MAX_ITER = 1
 STATUS_BAD_PIVOT = 2
 STATUS_NOT_FINITE = 3
 _STATUS_TEXT = {STATUS_MAX_ITER: 'Newton did not converge within the iteration limit',
-                STATUS_BAD_PIVOT: 'tiny pivot in the band LU',
+                STATUS_BAD_PIVOT: 'tiny pivot in the LU factorisation',
                 STATUS_NOT_FINITE: 'non-finite residual or update'}
 
 
@@ -47,22 +47,26 @@ class ConvergenceError(RuntimeError):
 
 @njit(cache=True)
 def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0,
-                    cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, dynamic, data, resid):
+                    cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, dynamic, data, resid,
+                    want_jac=True):
     """Residual (eq. 6) into ``resid`` (2N,) and Jacobian (eq. 8) scattered into ``data``.
 
     ``dynamic=False`` assembles the static problem ``dE/dx - f_ext = 0`` (no inertia, no
-    drag). Rows/columns of ``fixed`` DOFs are replaced by the identity. Returns the
-    max-norm of the residual over free DOFs [N].
+    drag). Rows/columns of ``fixed`` DOFs are replaced by the identity: the element maps
+    send their entries to a trash slot (the last entry of ``data``). With
+    ``want_jac=False`` only the residual is computed. Returns the max-norm of the
+    residual over free DOFs [N].
     """
     n = x.shape[0]
-    for k in range(data.shape[0]):
-        data[k] = 0.0
+    if want_jac:
+        for k in range(data.shape[0]):
+            data[k] = 0.0
     inv_h = 1.0 / h
     inv_h2 = inv_h * inv_h
     for d in range(n):
         if dynamic:
             resid[d] = mass2[d] * (x[d] - x_prev[d] - h * v_prev[d]) * inv_h2 - f_ext[d]
-            if not fixed[d]:
+            if want_jac and not fixed[d]:
                 data[diag_map[d]] += mass2[d] * inv_h2
         else:
             resid[d] = -f_ext[d]
@@ -70,6 +74,7 @@ def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_le
     h4 = np.empty((4, 4))
     g6 = np.empty(6)
     h6 = np.empty((6, 6))
+    work = np.empty((3, 4, 4))
     jv = np.empty((4, 4))
     jx = np.empty((4, 4))
     dof4 = np.empty(4, dtype=np.int64)
@@ -88,36 +93,36 @@ def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_le
             vb0 = (x[dof4[2]] - x_prev[dof4[2]]) * inv_h
             vb1 = (x[dof4[3]] - x_prev[dof4[3]]) * inv_h
             drag_element(x[dof4[0]], x[dof4[1]], x[dof4[2]], x[dof4[3]], va0, va1, vb0, vb1,
-                         cn[m], ct[m], g6, jv, jx)
+                         cn[m], ct[m], g6, jv, jx, want_jac)
             for p in range(4):
                 g4[p] -= g6[p]
-                for q in range(4):
-                    h4[p, q] -= jx[p, q] + jv[p, q] * inv_h
+                if want_jac:
+                    for q in range(4):
+                        h4[p, q] -= jx[p, q] + jv[p, q] * inv_h
         for p in range(4):
             resid[dof4[p]] += g4[p]
-            if fixed[dof4[p]]:
-                continue
-            for q in range(4):
-                if not fixed[dof4[q]]:
+        if want_jac:
+            for p in range(4):
+                for q in range(4):
                     data[edge_map[m, p, q]] += h4[p, q]
     for m in range(bends.shape[0]):
         for r in range(3):
             dof6[2 * r] = 2 * bends[m, r]
             dof6[2 * r + 1] = 2 * bends[m, r] + 1
         bend_element(x[dof6[0]], x[dof6[1]], x[dof6[2]], x[dof6[3]], x[dof6[4]], x[dof6[5]],
-                     bend_len[m], ei[m], kappa0[m], g6, h6)
+                     bend_len[m], ei[m], kappa0[m], g6, h6, work, want_jac)
         for p in range(6):
             resid[dof6[p]] += g6[p]
-            if fixed[dof6[p]]:
-                continue
-            for q in range(6):
-                if not fixed[dof6[q]]:
+        if want_jac:
+            for p in range(6):
+                for q in range(6):
                     data[bend_map[m, p, q]] += h6[p, q]
     norm = 0.0
     for d in range(n):
         if fixed[d]:
             resid[d] = 0.0
-            data[diag_map[d]] = 1.0
+            if want_jac:
+                data[diag_map[d]] = 1.0
         else:
             a = abs(resid[d])
             if not np.isfinite(resid[d]):
@@ -128,49 +133,84 @@ def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_le
 
 
 @njit(cache=True)
-def newton_banded(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0,
-                  cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, perm, bw, dynamic,
-                  force_tol, pos_tol, max_iter, band, rhs, resid):
-    """Newton iterations (eq. 7) with the band LU; ``x`` holds the guess and the result.
+def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0,
+                  cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, dynamic,
+                  force_tol, pos_tol, max_iter, lu, rhs, resid, lu_state, reuse):
+    """Newton iterations (eq. 7) with the numba sparse LU; ``x`` holds the guess and result.
 
-    Returns (status, iterations, residual max-norm).
+    ``plan`` = (diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx, op_ptr,
+    op_target, op_lower, op_upper) of a :class:`~frog_sim.core.linear_algebra.SparseLUPlan`.
+    With ``reuse`` the LU factors kept in ``lu`` (valid when ``lu_state[0] == 1``) are
+    reused across iterations and steps (simplified Newton); the Jacobian is
+    re-assembled and re-factorised as soon as the residual contracts by less than a
+    factor 4 per iteration. Convergence: ``max|F| <= force_tol``, or a full Newton
+    update (fresh Jacobian) with ``max|dx| <= pos_tol``. ``lu_state[1]`` counts
+    factorisations. Returns (status, iterations, residual norm).
     """
     n = x.shape[0]
-    flat = band.reshape(-1)
+    diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx, op_ptr, op_t, op_l, op_u = plan
     norm = np.inf
+    prev = np.inf
+    x_last = x.copy()      # iterate before the last update (to undo a bad simplified step)
+    last_fresh = True      # was the last update a full Newton step?
     for it in range(max_iter):
+        if not reuse:
+            lu_state[0] = 0
+        fresh = lu_state[0] == 0
         norm = assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len,
                                ei, kappa0, cn, ct, f_ext, fixed, edge_map, bend_map, diag_map,
-                               dynamic, flat, resid)
-        if not np.isfinite(norm):
-            return STATUS_NOT_FINITE, it, norm
+                               dynamic, lu, resid, False)
         if norm <= force_tol:
             return STATUS_OK, it, norm
+        if not fresh and not (norm <= 0.25 * prev):
+            fresh = True
+            if not last_fresh:
+                # a simplified step (old factors) contracted too little or diverged: go back
+                # to the previous iterate and take a full Newton step from there
+                for d in range(n):
+                    x[d] = x_last[d]
+                norm = prev
+        if not np.isfinite(norm):
+            lu_state[0] = 0
+            return STATUS_NOT_FINITE, it, norm
+        if fresh:
+            assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei,
+                            kappa0, cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, dynamic,
+                            lu, resid, True)
+            st = sparse_lu_factor(lu, diag, low_ptr, low_idx, op_ptr, op_t, op_l, op_u, 1e-13)
+            lu_state[1] += 1
+            if st != 0:
+                lu_state[0] = 0
+                return STATUS_BAD_PIVOT, it, norm
+            lu_state[0] = 1
+        prev = norm
+        last_fresh = fresh
         for i in range(n):
             rhs[i] = resid[perm[i]]
-        st = band_lu_solve(band, rhs, bw, 1e-13)
-        if st != 0:
-            return STATUS_BAD_PIVOT, it, norm
+            x_last[i] = x[i]
+        sparse_lu_substitute(lu, rhs, diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx)
         step = 0.0
         for i in range(n):
             dx = rhs[i]
             if not np.isfinite(dx):
+                lu_state[0] = 0
                 return STATUS_NOT_FINITE, it, norm
             x[perm[i]] -= dx
             if abs(dx) > step:
                 step = abs(dx)
-        if step <= pos_tol:
+        if fresh and step <= pos_tol:
             return STATUS_OK, it + 1, norm
+    lu_state[0] = 0
     return STATUS_MAX_ITER, max_iter, norm
 
 
 @njit(cache=True)
-def run_banded(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei, kappa0, cn, ct,
-               f_ext, fixed, edge_map, bend_map, diag_map, perm, bw, force_tol, pos_tol, max_iter,
-               act_profile, act_young, act_times, act_offsets, act_bend, act_bend_limb,
+def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei, kappa0, cn, ct,
+               f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, force_tol, pos_tol,
+               max_iter, act_profile, act_young, act_times, act_offsets, act_bend, act_bend_limb,
                act_bend_sign, act_bend_i, act_edge, act_edge_limb, act_edge_area,
-               band, rhs, resid, x_prev, v_prev):
-    """Advance ``n_steps`` steps of size ``h`` in place (x, v).
+               lu, rhs, resid, x_prev, v_prev, lu_state, reuse):
+    """Advance ``n_steps`` steps of size ``h`` in place (x, v), actuation included.
 
     Returns (steps done, status of the failing step or 0, total Newton iterations,
     last residual norm). On failure x, v hold the state before the failing step.
@@ -188,10 +228,10 @@ def run_banded(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
             v_prev[d] = v[d]
             if not fixed[d]:
                 x[d] = x[d] + h * v[d]
-        status, iters, norm = newton_banded(
+        status, iters, norm = newton_direct(
             x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0, cn, ct,
-            f_ext, fixed, edge_map, bend_map, diag_map, perm, bw, True, force_tol, pos_tol,
-            max_iter, band, rhs, resid)
+            f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, True, force_tol, pos_tol,
+            max_iter, lu, rhs, resid, lu_state, reuse)
         total_iter += iters
         if status != 0:
             for d in range(n):
@@ -228,8 +268,9 @@ class ImplicitEulerIntegrator:
         Actuated limb elements; ``None`` for a passive network.
     fixed_dofs : array-like of int, optional
         Clamped degrees of freedom (index ``2*node + component``).
-    solver : {'banded', 'sparse'}
-        Fast numba band LU (default) or scipy SuperLU on the CSR Jacobian.
+    solver : {'direct', 'superlu'}
+        Numba sparse LU with a precomputed minimum-degree plan (default) or scipy
+        SuperLU on the CSR Jacobian (reference path, also the automatic fallback).
     force_tolerance : float
         Newton residual tolerance max|F| [N].
     position_tolerance : float
@@ -238,6 +279,10 @@ class ImplicitEulerIntegrator:
         Newton iterations per attempt.
     max_halvings : int
         Recursive step halvings before :class:`ConvergenceError`.
+    reuse_jacobian : bool
+        Keep the LU factors across Newton iterations and steps while the residual
+        contracts fast (simplified Newton); re-factorise otherwise. Same converged
+        result (residual test), fewer factorisations.
 
     Attributes
     ----------
@@ -250,10 +295,10 @@ class ImplicitEulerIntegrator:
     """
 
     def __init__(self, network, mass, *, fluid_density=1000.0, actuator=None, fixed_dofs=(),
-                 solver='banded', force_tolerance=1e-9, position_tolerance=1e-11,
-                 max_iterations=25, max_halvings=8):
-        if solver not in ('banded', 'sparse'):
-            raise ValueError(f"solver = {solver!r}, expected 'banded' or 'sparse'")
+                 solver='direct', force_tolerance=1e-9, position_tolerance=1e-11,
+                 max_iterations=25, max_halvings=8, reuse_jacobian=True):
+        if solver not in ('direct', 'superlu'):
+            raise ValueError(f"solver = {solver!r}, expected 'direct' or 'superlu'")
         mass = np.asarray(mass, dtype=float)
         if mass.shape != (network.n_nodes,) or np.any(mass <= 0) or not np.all(np.isfinite(mass)):
             raise ValueError(f'mass must be {network.n_nodes} positive finite values')
@@ -276,8 +321,19 @@ class ImplicitEulerIntegrator:
         self.fixed[fixed_dofs] = True
         self.pattern = build_jacobian_pattern(network.n_nodes, network.edges, network.bends)
         n = network.n_dof
-        self._band = np.zeros((n, 2 * self.pattern.bandwidth + 1))
-        self._csr_data = np.zeros(self.pattern.nnz)
+        plan = self.pattern.lu_plan
+        self._lu = np.zeros(plan.nnz + 1)            # last entry: trash slot of fixed DOFs
+        self._csr_data = np.zeros(self.pattern.nnz + 1)
+        self._maps_lu = self._masked_maps(self.pattern.edge_map_lu, self.pattern.bend_map_lu,
+                                          self.pattern.diag_map_lu, plan.nnz)
+        self._maps_csr = self._masked_maps(self.pattern.edge_map_csr, self.pattern.bend_map_csr,
+                                           self.pattern.diag_map_csr, self.pattern.nnz)
+        self._plan = (plan.diag, plan.low_ptr, plan.low_row, plan.low_idx, plan.up_ptr,
+                      plan.up_col, plan.up_idx, plan.op_ptr, plan.op_target, plan.op_lower,
+                      plan.op_upper)
+        self.reuse_jacobian = bool(reuse_jacobian)
+        self._lu_state = np.zeros(2, dtype=np.int64)   # [factors valid, factorisations]
+        self._lu_h = None
         self._rhs = np.zeros(n)
         self._resid = np.zeros(n)
         self._x_prev = np.zeros(n)
@@ -291,6 +347,24 @@ class ImplicitEulerIntegrator:
         self.time = 0.0
         self.stats = StepStatistics()
         self.update_actuation(self.time)
+
+    def _masked_maps(self, edge_map, bend_map, diag_map, trash):
+        """Copies of the element maps with rows/columns of fixed DOFs sent to ``trash``."""
+        net = self.network
+        edof = np.repeat(2 * net.edges, 2, axis=1) + np.tile([0, 1], 2)
+        bdof = np.repeat(2 * net.bends, 2, axis=1) + np.tile([0, 1], 3)
+        em = edge_map.copy()
+        bm = bend_map.copy()
+        fe = self.fixed[edof]
+        fb = self.fixed[bdof]
+        em[fe[:, :, None] | fe[:, None, :]] = trash
+        bm[fb[:, :, None] | fb[:, None, :]] = trash
+        return em, bm, diag_map.copy()
+
+    @property
+    def factorizations(self) -> int:
+        """Number of LU factorisations so far (Jacobian refreshes)."""
+        return int(self._lu_state[1])
 
     # ------------------------------------------------------------------ helpers
     def update_actuation(self, t: float) -> None:
@@ -309,14 +383,13 @@ class ImplicitEulerIntegrator:
         pat = self.pattern
         norm = np.inf
         for it in range(self.max_iterations):
-            norm = self._assemble(x, x_prev, v_prev, h, dynamic, self._csr_data,
-                                  pat.edge_map_csr, pat.bend_map_csr, pat.diag_map_csr)
+            norm = self._assemble(x, x_prev, v_prev, h, dynamic, self._csr_data, *self._maps_csr)
             if not np.isfinite(norm):
                 return STATUS_NOT_FINITE, it, norm
             if norm <= self.force_tolerance:
                 return STATUS_OK, it, norm
             try:
-                dx = spla.spsolve(pat.csr(self._csr_data).tocsc(), self._resid)
+                dx = spla.spsolve(pat.csr(self._csr_data[:-1]).tocsc(), self._resid)
             except RuntimeError:
                 return STATUS_BAD_PIVOT, it, norm
             if not np.all(np.isfinite(dx)):
@@ -328,14 +401,19 @@ class ImplicitEulerIntegrator:
 
     def _newton(self, x, x_prev, v_prev, h, dynamic, solver):
         pat = self.pattern
-        if solver == 'banded':
-            status, iters, norm = newton_banded(
+        if solver == 'direct':
+            reuse = self.reuse_jacobian and dynamic
+            if not reuse or self._lu_h != h:
+                self._lu_state[0] = 0
+            self._lu_h = h if reuse else None
+            status, iters, norm = newton_direct(
                 x, x_prev, v_prev, h, self.mass2, self.network.edges,
                 self.network.edge_rest_length, self.ea, self.network.bends,
                 self.network.bend_length, self.ei, self.kappa0, self.cn, self.ct,
-                self.external_force, self.fixed, pat.edge_map_band, pat.bend_map_band,
-                pat.diag_map_band, pat.perm, pat.bandwidth, dynamic, self.force_tolerance,
-                self.position_tolerance, self.max_iterations, self._band, self._rhs, self._resid)
+                self.external_force, self.fixed, *self._maps_lu, pat.lu_plan.perm, self._plan,
+                dynamic, self.force_tolerance,
+                self.position_tolerance, self.max_iterations, self._lu, self._rhs, self._resid,
+                self._lu_state, reuse)
             if status != STATUS_BAD_PIVOT:
                 return status, iters, norm
             self.stats.sparse_fallbacks += 1
@@ -399,24 +477,27 @@ class ImplicitEulerIntegrator:
         n_steps = int(n_steps)
         if n_steps < 0:
             raise ValueError(f'n_steps = {n_steps} must be >= 0')
-        if self.solver != 'banded':
+        if self.solver != 'direct':
             for _ in range(n_steps):
                 self.step(h)
             return
         pat = self.pattern
         act = self.actuator.as_tuple()
+        if not self.reuse_jacobian or self._lu_h != h:
+            self._lu_state[0] = 0
+        self._lu_h = h if self.reuse_jacobian else None
         remaining = n_steps
         t0 = self.time
         done_total = 0
         while remaining > 0:
-            done, status, iters, norm = run_banded(
+            done, status, iters, norm = run_direct(
                 remaining, t0 + done_total * h, h, self.x, self.v,
                 self.mass2, self.network.edges, self.network.edge_rest_length, self.ea,
                 self.network.bends, self.network.bend_length, self.ei, self.kappa0, self.cn,
-                self.ct, self.external_force, self.fixed, pat.edge_map_band, pat.bend_map_band,
-                pat.diag_map_band, pat.perm, pat.bandwidth, self.force_tolerance,
-                self.position_tolerance, self.max_iterations, *act, self._band, self._rhs,
-                self._resid, self._x_prev, self._v_prev)
+                self.ct, self.external_force, self.fixed, *self._maps_lu, pat.lu_plan.perm,
+                self._plan, self.force_tolerance,
+                self.position_tolerance, self.max_iterations, *act, self._lu, self._rhs,
+                self._resid, self._x_prev, self._v_prev, self._lu_state, self.reuse_jacobian)
             self.stats.newton_iterations += iters
             self.stats.last_residual = norm
             self.stats.steps += done
@@ -425,7 +506,11 @@ class ImplicitEulerIntegrator:
             self.time = t0 + done_total * h
             if status != STATUS_OK:
                 # retry the failing step robustly (halving / SuperLU), then continue fast
+                self._lu_state[0] = 0
                 self._robust_step(h)
+                if self._lu_h != h:
+                    self._lu_state[0] = 0
+                    self._lu_h = h if self.reuse_jacobian else None
                 self.stats.steps += 1
                 done_total += 1
                 remaining -= 1
@@ -467,14 +552,13 @@ class ImplicitEulerIntegrator:
     def internal_force(self, x=None) -> np.ndarray:
         """Elastic force ``-dE/dx`` (2N,) [N] at ``x`` (default: current state)."""
         x = self.x if x is None else np.ascontiguousarray(x, dtype=float)
-        data = np.zeros(self.pattern.nnz)
+        data = np.zeros(self.pattern.nnz + 1)
         saved = self.external_force
         self.external_force = np.zeros_like(saved)
         fixed = self.fixed
         self.fixed = np.zeros_like(fixed)
         try:
-            self._assemble(x, x, self.v, 1.0, False, data, self.pattern.edge_map_csr,
-                           self.pattern.bend_map_csr, self.pattern.diag_map_csr)
+            self._assemble(x, x, self.v, 1.0, False, data, *self._maps_csr)
         finally:
             self.external_force = saved
             self.fixed = fixed

@@ -6,9 +6,13 @@ joint nodes). The pattern is computed once (:func:`build_jacobian_pattern`); eac
 element block is scattered by precomputed index maps into
 
 * the ``data`` array of a ``scipy.sparse.csr_matrix`` (robust path, SuperLU), or
-* a dense band after a reverse Cuthill-McKee renumbering of the degrees of freedom
-  (fast path, :func:`band_lu_solve`, LU without pivoting, guarded by a pivot test;
-  on a tiny pivot the caller falls back to SuperLU).
+* the value array of a static sparse LU (fast path): the DOFs are put in a greedy
+  minimum-degree order (limb tips first, the body ring last), the fill pattern is
+  computed once, and the numeric factorisation is a precomputed flat list of
+  multiply-subtract operations run by numba (:func:`sparse_lu_factor`). It does not
+  pivot; a pivot test guards it and the caller falls back to SuperLU on failure.
+  For the frog (256 DOFs) this is ~14k operations per factorisation against ~74k
+  for a band LU in reverse Cuthill-McKee order.
 """
 from __future__ import annotations
 
@@ -33,14 +37,12 @@ class JacobianPattern:
     edge_map_csr : ndarray of int, shape (E, 4, 4)
     bend_map_csr : ndarray of int, shape (B, 6, 6)
     diag_map_csr : ndarray of int, shape (n,)
-    perm : ndarray of int, shape (n,)
-        Band order -> original DOF.
-    iperm : ndarray of int, shape (n,)
-        Original DOF -> band order.
     bandwidth : int
-        Half bandwidth (in DOFs) after renumbering.
-    edge_map_band, bend_map_band, diag_map_band : ndarray of int
-        Same as the CSR maps but into the flattened band array (n, 2 bw + 1).
+        Half bandwidth (in DOFs) in reverse Cuthill-McKee order (for reference).
+    lu_plan : SparseLUPlan
+        Static plan of the numba sparse LU.
+    edge_map_lu, bend_map_lu, diag_map_lu : ndarray of int
+        Same as the CSR maps but into the LU value array.
     """
 
     n: int
@@ -49,12 +51,11 @@ class JacobianPattern:
     edge_map_csr: np.ndarray
     bend_map_csr: np.ndarray
     diag_map_csr: np.ndarray
-    perm: np.ndarray
-    iperm: np.ndarray
     bandwidth: int
-    edge_map_band: np.ndarray
-    bend_map_band: np.ndarray
-    diag_map_band: np.ndarray
+    lu_plan: 'SparseLUPlan'
+    edge_map_lu: np.ndarray
+    bend_map_lu: np.ndarray
+    diag_map_lu: np.ndarray
 
     @property
     def nnz(self) -> int:
@@ -75,7 +76,7 @@ def _element_dofs(nodes: np.ndarray) -> np.ndarray:
 
 
 def build_jacobian_pattern(n_nodes: int, edges: np.ndarray, bends: np.ndarray) -> JacobianPattern:
-    """Precompute the CSR pattern, the RCM band order and all scatter maps.
+    """Precompute the CSR pattern, the sparse LU plan and all scatter maps.
 
     Parameters
     ----------
@@ -114,59 +115,165 @@ def build_jacobian_pattern(n_nodes: int, edges: np.ndarray, bends: np.ndarray) -
     iperm = np.empty(n, dtype=np.int64)
     iperm[perm] = np.arange(n)
     bw = int(np.max(np.abs(iperm[ur] - iperm[uc]))) if keys.size else 0
-    width = 2 * bw + 1
-    csr_to_band = (iperm[ur] * width + (iperm[uc] - iperm[ur] + bw)).astype(np.int64)
+    # sparse LU plan: minimum-degree order on nodes (x, y of a node stay together)
+    node_graph = sp.csr_matrix((np.ones(keys.size), (ur // 2, uc // 2)), shape=(n // 2, n // 2))
+    node_graph.sum_duplicates()
+    node_order = minimum_degree_order(node_graph)
+    lu_perm = np.empty(n, dtype=np.int64)
+    lu_perm[0::2] = 2 * node_order
+    lu_perm[1::2] = 2 * node_order + 1
+    plan = build_sparse_lu_plan(n, ur, uc, lu_perm)
+    pi = plan.iperm
+    csr_to_lu = np.array([plan.index_of[(a, b)] for a, b in zip(pi[ur].tolist(), pi[uc].tolist())],
+                         dtype=np.int64)
     return JacobianPattern(
         n=n, indptr=indptr, indices=indices, edge_map_csr=edge_map, bend_map_csr=bend_map,
-        diag_map_csr=diag_map, perm=perm, iperm=iperm, bandwidth=bw,
-        edge_map_band=csr_to_band[edge_map], bend_map_band=csr_to_band[bend_map],
-        diag_map_band=csr_to_band[diag_map])
+        diag_map_csr=diag_map, bandwidth=bw, lu_plan=plan, edge_map_lu=csr_to_lu[edge_map],
+        bend_map_lu=csr_to_lu[bend_map], diag_map_lu=csr_to_lu[diag_map])
 
 
-@njit(cache=True)
-def band_lu_solve(ab, rhs, bw, pivot_tolerance):
-    """Solve ``A y = rhs`` in place for a band matrix without pivoting.
+# --------------------------------------------------------------------------- sparse LU
+def minimum_degree_order(graph: sp.csr_matrix) -> np.ndarray:
+    """Greedy minimum-degree elimination order of a symmetric sparsity graph.
 
     Parameters
     ----------
-    ab : ndarray, shape (n, 2 bw + 1)
-        ``ab[i, j - i + bw] = A[i, j]``; overwritten by the LU factors.
-    rhs : ndarray, shape (n,)
-        Right-hand side, overwritten by the solution.
-    bw : int
-        Half bandwidth.
-    pivot_tolerance : float
-        A pivot with ``|p| <= pivot_tolerance * max|diag(A)|`` aborts.
+    graph : scipy.sparse.csr_matrix, shape (n, n)
+        Structurally symmetric pattern.
 
     Returns
     -------
-    int
-        0 on success, 2 on a tiny or non-finite pivot (caller should use a pivoting solver).
+    ndarray of int, shape (n,)
+        Elimination order (few fill-ins: limb tips go first, the body ring last).
     """
-    n = ab.shape[0]
+    n = graph.shape[0]
+    adj = [set(graph.indices[graph.indptr[i]:graph.indptr[i + 1]]) - {i} for i in range(n)]
+    alive = np.ones(n, dtype=bool)
+    order = []
+    for _ in range(n):
+        cand = np.flatnonzero(alive)
+        degrees = np.array([len(adj[i]) for i in cand])
+        k = int(cand[np.argmin(degrees)])
+        nb = adj[k]
+        for i in nb:
+            adj[i] |= nb
+            adj[i] -= {i, k}
+        alive[k] = False
+        adj[k] = set()
+        order.append(k)
+    return np.asarray(order, dtype=np.int64)
+
+
+@dataclass
+class SparseLUPlan:
+    """Static plan of an unpivoted sparse LU on a fixed pattern (fill included).
+
+    The numeric factorisation is a flat list of multiply-subtract operations
+    ``lu[target] -= lu[lower] * lu[upper]``, executed by :func:`sparse_lu_factor`.
+    """
+
+    n: int
+    perm: np.ndarray          # elimination position -> original DOF
+    iperm: np.ndarray         # original DOF -> elimination position
+    nnz: int                  # stored entries incl. fill
+    diag: np.ndarray          # (n,) index of (k, k)
+    low_ptr: np.ndarray       # (n+1,) entries (i, k), i > k, of column k
+    low_row: np.ndarray
+    low_idx: np.ndarray
+    up_ptr: np.ndarray        # (n+1,) entries (k, j), j > k, of row k
+    up_col: np.ndarray
+    up_idx: np.ndarray
+    op_ptr: np.ndarray        # (n+1,) update operations of step k
+    op_target: np.ndarray
+    op_lower: np.ndarray
+    op_upper: np.ndarray
+    index_of: dict            # (row, col) in elimination numbering -> lu index
+
+
+def build_sparse_lu_plan(n: int, rows: np.ndarray, cols: np.ndarray, perm: np.ndarray) -> SparseLUPlan:
+    """Symbolic factorisation of the pattern (rows, cols) in the order ``perm``."""
+    iperm = np.empty(n, dtype=np.int64)
+    iperm[perm] = np.arange(n)
+    pr, pc = iperm[rows], iperm[cols]
+    struct = [set() for _ in range(n)]      # symmetric structure, elimination numbering
+    for r, c in zip(pr.tolist(), pc.tolist()):
+        struct[r].add(c)
+        struct[c].add(r)
+    higher = [set(j for j in struct[k] if j > k) for k in range(n)]
+    for k in range(n):                       # symbolic elimination (fill)
+        nb = sorted(higher[k])
+        for a in nb:
+            higher[a].update(j for j in nb if j > a)
+    entries = []
+    for k in range(n):
+        entries.append((k, k))
+        for j in sorted(higher[k]):
+            entries.append((k, j))
+            entries.append((j, k))
+    index_of = {e: i for i, e in enumerate(entries)}
+    diag = np.array([index_of[(k, k)] for k in range(n)], dtype=np.int64)
+    low_ptr, low_row, low_idx = [0], [], []
+    up_ptr, up_col, up_idx = [0], [], []
+    op_ptr, op_t, op_l, op_u = [0], [], [], []
+    for k in range(n):
+        nb = sorted(higher[k])
+        for i in nb:
+            low_row.append(i)
+            low_idx.append(index_of[(i, k)])
+            up_col.append(i)
+            up_idx.append(index_of[(k, i)])
+        for i in nb:
+            li = index_of[(i, k)]
+            for j in nb:
+                op_t.append(index_of[(i, j)])
+                op_l.append(li)
+                op_u.append(index_of[(k, j)])
+        low_ptr.append(len(low_row))
+        up_ptr.append(len(up_col))
+        op_ptr.append(len(op_t))
+    as_int = lambda a: np.asarray(a, dtype=np.int64)  # noqa: E731
+    return SparseLUPlan(n=n, perm=np.asarray(perm, dtype=np.int64), iperm=iperm,
+                        nnz=len(entries), diag=diag, low_ptr=as_int(low_ptr),
+                        low_row=as_int(low_row), low_idx=as_int(low_idx), up_ptr=as_int(up_ptr),
+                        up_col=as_int(up_col), up_idx=as_int(up_idx), op_ptr=as_int(op_ptr),
+                        op_target=as_int(op_t), op_lower=as_int(op_l), op_upper=as_int(op_u),
+                        index_of=index_of)
+
+
+@njit(cache=True)
+def sparse_lu_factor(lu, diag, low_ptr, low_idx, op_ptr, op_target, op_lower, op_upper,
+                     pivot_tolerance):
+    """Numeric LU in place on the plan's storage (no pivoting); 0 or 2 on a tiny pivot."""
+    n = diag.shape[0]
     scale = 0.0
     for k in range(n):
-        a = abs(ab[k, bw])
+        a = abs(lu[diag[k]])
         if a > scale:
             scale = a
     tiny = pivot_tolerance * scale
     for k in range(n):
-        piv = ab[k, bw]
+        piv = lu[diag[k]]
         if not (abs(piv) > tiny) or not np.isfinite(piv):
             return 2
-        hi = min(n, k + bw + 1)
-        for i in range(k + 1, hi):
-            lik = ab[i, k - i + bw]
-            if lik != 0.0:
-                lik /= piv
-                ab[i, k - i + bw] = lik
-                for j in range(k + 1, hi):
-                    ab[i, j - i + bw] -= lik * ab[k, j - k + bw]
-                rhs[i] -= lik * rhs[k]
+        inv = 1.0 / piv
+        for p in range(low_ptr[k], low_ptr[k + 1]):
+            lu[low_idx[p]] *= inv
+        for p in range(op_ptr[k], op_ptr[k + 1]):
+            lu[op_target[p]] -= lu[op_lower[p]] * lu[op_upper[p]]
+    return 0
+
+
+@njit(cache=True)
+def sparse_lu_substitute(lu, rhs, diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx):
+    """Forward/backward substitution with the factors; ``rhs`` (elimination order) in place."""
+    n = diag.shape[0]
+    for k in range(n):
+        rk = rhs[k]
+        if rk != 0.0:
+            for p in range(low_ptr[k], low_ptr[k + 1]):
+                rhs[low_row[p]] -= lu[low_idx[p]] * rk
     for k in range(n - 1, -1, -1):
         s = rhs[k]
-        hi = min(n, k + bw + 1)
-        for j in range(k + 1, hi):
-            s -= ab[k, j - k + bw] * rhs[j]
-        rhs[k] = s / ab[k, bw]
-    return 0
+        for p in range(up_ptr[k], up_ptr[k + 1]):
+            s -= lu[up_idx[p]] * rhs[up_col[p]]
+        rhs[k] = s / lu[diag[k]]

@@ -96,7 +96,7 @@ class FrogSimulation:
         dt [s] of every step (default :data:`DEFAULT_TIME_STEP`).
     library : ActuationLibrary, optional
         Fitted curvature profiles (default: loaded from the cache / fitted once).
-    solver : {'banded', 'sparse'}
+    solver : {'direct', 'superlu'}
         Linear solver of the Newton steps.
     force_tolerance : float
         Newton residual tolerance [N].
@@ -109,7 +109,7 @@ class FrogSimulation:
     """
 
     def __init__(self, params: FrogParameters | None = None, *, time_step: float = DEFAULT_TIME_STEP,
-                 library: ActuationLibrary | None = None, solver: str = 'banded',
+                 library: ActuationLibrary | None = None, solver: str = 'direct',
                  force_tolerance: float = DEFAULT_FORCE_TOLERANCE):
         self.params = params or FrogParameters()
         self.params.validate()
@@ -158,9 +158,13 @@ class FrogSimulation:
         if prof is self.profile:
             return prof
         if self.time == 0.0 and np.allclose(self.integrator.v, 0.0):
+            # still at rest at t = 0: rebuild so the limbs start at this profile's relaxed
+            # curvature, keeping the pose the user may have set
             schedule, gait = self._schedule, self._gait
+            pose = self.rigid_body_state()
             self._build(prof)
             self._schedule, self._gait = schedule, gait
+            self.set_pose(pose.com[0], pose.com[1], pose.heading)
         else:
             self.profile = prof
             self._actuator.limb_profile[:] = prof.as_row()
