@@ -5,14 +5,17 @@ Layout (robot frame ``frog``: x forward, y left, origin at the body centre):
 * body: a closed ring of four stiff rods, side ``L_o``, ``n`` edges per side; ring nodes
   run counter-clockwise from the front-right corner: FR = 0, FL = n, BL = 2n, BR = 3n.
   The corner turning angles (90 deg) are the body's natural curvature.
-* limbs FL, FR, BL, BR: one rod of ``L_i`` per corner, leaving the corner laterally as
-  the continuation of the front (rear) side, so each corner node joins three edges and
-  carries two bending energies (body corner + limb root), paper "Energy ...".
+* limbs FL, FR, BL, BR: one rod of ``L_i`` per corner. Each corner node joins three
+  edges and carries two bending energies (body corner + limb root), paper "Energy ...".
+  The root direction is the lateral direction turned toward the rear by
+  ``-limb_root_angle_deg`` (default -75 deg: pointing aft, 15 deg outward of the body
+  axis, like frog legs). Fig. 2b does not give this angle; it was calibrated against
+  the 10 % EGaIn speed runs (see ``model_parameters``), as the paper did with C_bn.
   The root bend uses the body stiffness (the limb is strapped to the body); the
   limb's interior bends are actuated: natural curvature ``sign * kappa(t)`` (eq. 9),
-  stiffness ``E(t) I``. Relaxed limbs curl toward the rear (``limb_curl_direction =
-  'backward'``): the fast unrolling stroke then drives the robot forward (+x); the
-  mirrored layout swims backward at the same speed.
+  stiffness ``E(t) I``. Relaxed aft-pointing limbs curl toward the body axis
+  (``limb_curl_direction = 'backward'``); the fast unrolling kick drives the robot
+  forward (+x), the slow re-curling (recovery) costs less because drag is quadratic.
 * No contact is modelled; a curled rear limb may overlap the body in the plane (in
   the robot the limbs sit below the foam body).
 """
@@ -168,7 +171,7 @@ def build_frog_model(params: FrogParameters | None = None, relaxed_curvature: fl
     builder = RodNetworkBuilder()
     ring_ids = builder.add_nodes(ring)
     body_kw = dict(stretching_stiffness=p.body_stretching_stiffness,
-                   linear_density=p.body_linear_density, diameter=p.body_height,
+                   linear_density=p.body_linear_density, diameter=p.body_rod_diameter,
                    drag_normal=p.body_drag_normal, drag_tangent=p.body_drag_tangent)
     builder.add_rod(ring_ids, bending_stiffness=p.body_bending_stiffness, closed=True,
                     group=BODY_GROUP, **body_kw)
@@ -188,6 +191,10 @@ def build_frog_model(params: FrogParameters | None = None, relaxed_curvature: fl
         corner = corner_of[limb]
         side_nb, direction, sign = layout[limb]
         sign = int(sign * curl)
+        # turn the lateral direction by the root angle (negative: toward the rear)
+        aft = np.radians(p.limb_root_angle_deg) * (-1.0 if direction[1] > 0 else 1.0)
+        direction = (np.cos(aft) * direction[0] - np.sin(aft) * direction[1],
+                     np.sin(aft) * direction[0] + np.cos(aft) * direction[1])
         pts = _limb_points(ring[corner], direction, n_limb, dl, sign * turning)
         ids = builder.add_nodes(pts)
         e0 = len(builder._edges)
