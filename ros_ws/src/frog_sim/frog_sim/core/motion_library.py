@@ -1,0 +1,300 @@
+"""Motion-primitive library: every primitive simulated from many initial body velocities.
+
+Paper: seed 000, "Data Collection Using the DER Simulation" and Fig. S2. For N initial
+states sampled uniformly over (forward, lateral, yaw rate) body velocities, each of the
+nine primitives is simulated from the rest shape moving rigidly with that velocity
+(eq. 13), and the rigid-body state (eq. 10-12) is stored at regular times along the
+whole horizon, in the body frame of the start pose. The file layout is the contract in
+``docs/motion_library_format.md`` (frog_planner reads it without importing this module).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from .batch import atomic_save_npz, run_chunked, spec_hash
+from .model_parameters import FrogParameters
+from .schedules import PRIMITIVE_BITS, PRIMITIVE_NAMES
+
+__all__ = ["LibrarySpec", "LibraryFileError", "sample_initial_states", "simulate_transitions",
+           "generate_library", "load_library", "FORMAT", "FORMAT_VERSION"]
+
+FORMAT = "frog-motion-library"
+FORMAT_VERSION = 1
+STATE_NAMES = ("forward_velocity", "lateral_velocity", "yaw_rate")
+TRANSITION_NAMES = ("x", "y", "heading", "forward_velocity", "lateral_velocity", "yaw_rate")
+
+
+class LibraryFileError(ValueError):
+    """A library file is missing, truncated, foreign or inconsistent."""
+
+
+@dataclass
+class LibrarySpec:
+    """What a library is made of (all SI). Defaults: paper / authors' data.
+
+    Attributes
+    ----------
+    n_states : int
+        Number of sampled initial states N (paper: 8503).
+    horizon : float
+        Simulated time per transition [s] (authors' data 3.0; up to 5).
+    sample_interval : float
+        Spacing of the stored samples [s]; the planner's period must be a multiple.
+    seed : int
+        Seed of the uniform sampling (numpy default_rng).
+    forward_range, lateral_range : (float, float)
+        Initial body velocity ranges [m/s] (0..4 cm/s forward, -3..3 cm/s lateral).
+    yaw_rate_range : (float, float)
+        Initial yaw rate range [rad/s] (-30..30 deg/s).
+    params : dict
+        FrogParameters overrides (e.g. ``{"egain_vol_pct": 10.0}``).
+    time_step : float, optional
+        Integrator step [s] (default: the simulator's default).
+    """
+
+    n_states: int = 200
+    horizon: float = 3.0
+    sample_interval: float = 0.05
+    seed: int = 0
+    forward_range: tuple = (0.0, 0.04)
+    lateral_range: tuple = (-0.03, 0.03)
+    yaw_rate_range: tuple = (-np.deg2rad(30.0), np.deg2rad(30.0))
+    params: Optional[dict] = None
+    time_step: Optional[float] = None
+
+    def validate(self) -> None:
+        if self.n_states < 1:
+            raise ValueError(f"n_states = {self.n_states} must be >= 1")
+        if not 0 < self.horizon <= 5.0:
+            raise ValueError(f"horizon = {self.horizon} s must be in (0, 5]")
+        steps = self.horizon / self.sample_interval
+        if not (self.sample_interval > 0 and abs(steps - round(steps)) < 1e-9):
+            raise ValueError(f"sample_interval = {self.sample_interval} s must divide the horizon "
+                             f"{self.horizon} s")
+        for name in ("forward_range", "lateral_range", "yaw_rate_range"):
+            lo, hi = getattr(self, name)
+            if not lo <= hi:
+                raise ValueError(f"{name} = {(lo, hi)} must be (low, high) with low <= high")
+
+    def as_json(self) -> dict:
+        from .simulation import DEFAULT_TIME_STEP
+        return {"n_states": int(self.n_states), "horizon_s": float(self.horizon),
+                "sample_interval_s": float(self.sample_interval), "seed": int(self.seed),
+                "forward_velocity_range": [float(v) for v in self.forward_range],
+                "lateral_velocity_range": [float(v) for v in self.lateral_range],
+                "yaw_rate_range": [float(v) for v in self.yaw_rate_range],
+                "params": FrogParameters().replace(**(self.params or {})).as_dict(),
+                "time_step_s": float(self.time_step or DEFAULT_TIME_STEP)}
+
+
+def sample_initial_states(spec: LibrarySpec) -> np.ndarray:
+    """Uniform samples, shape (N, 3): forward [m/s], lateral [m/s], yaw rate [rad/s]."""
+    rng = np.random.default_rng(spec.seed)
+    lo = np.array([spec.forward_range[0], spec.lateral_range[0], spec.yaw_rate_range[0]])
+    hi = np.array([spec.forward_range[1], spec.lateral_range[1], spec.yaw_rate_range[1]])
+    return lo + (hi - lo) * rng.random((spec.n_states, 3))
+
+
+_SIMULATORS: dict = {}
+
+
+def _simulator(spec_json: dict):
+    """One simulator per worker process and spec (model build and numba warm-up once)."""
+    from .simulation import FrogSimulation
+    key = spec_hash(spec_json)
+    if key not in _SIMULATORS:
+        _SIMULATORS.clear()
+        params = FrogParameters().replace(**spec_json["params"])
+        _SIMULATORS[key] = FrogSimulation(params, time_step=spec_json["time_step_s"])
+    return _SIMULATORS[key]
+
+
+def simulate_transitions(sim, initial_state, horizon: float, sample_interval: float,
+                         primitives=PRIMITIVE_NAMES) -> tuple[np.ndarray, np.ndarray]:
+    """Simulate each primitive from the rest shape moving with ``initial_state``.
+
+    Parameters
+    ----------
+    sim : FrogSimulation
+        Reused: reset before each transition.
+    initial_state : array_like, shape (3,)
+        Forward [m/s], lateral [m/s] body velocity and yaw rate [rad/s] at t = 0 (eq. 13).
+    horizon, sample_interval : float
+        [s]
+
+    Returns
+    -------
+    transitions : ndarray, shape (P, T, 6)
+        x, y [m], heading [rad] in the start pose's body frame; forward, lateral [m/s]
+        and yaw rate [rad/s] in the body frame at that time (eq. 10-12).
+    converged : ndarray of bool, shape (P,)
+    """
+    from .simulation import ConvergenceError
+    n_samples = int(round(horizon / sample_interval)) + 1
+    stride = int(round(sample_interval / sim.time_step))
+    if abs(stride * sim.time_step - sample_interval) > 1e-9:
+        raise ValueError(f"sample_interval {sample_interval} s is not a multiple of the time "
+                         f"step {sim.time_step} s")
+    out = np.full((len(primitives), n_samples, 6), np.nan)
+    ok = np.zeros(len(primitives), dtype=bool)
+    forward, lateral, yaw_rate = (float(v) for v in initial_state)
+    for p, prim in enumerate(primitives):
+        sim.reset()
+        sim.set_velocity(forward, lateral, yaw_rate, frame="body")
+        start = sim.rigid_body_state()
+        c, s = np.cos(start.heading), np.sin(start.heading)
+        to_body = np.array([[c, s], [-s, c]])   # R(-heading0)
+        sim.execute_primitive(prim, start=0.0)
+        try:
+            for k in range(n_samples):
+                if k:
+                    sim.step(stride)
+                st = sim.rigid_body_state()
+                out[p, k, :2] = to_body @ (st.com - start.com)
+                out[p, k, 2] = st.heading - start.heading
+                out[p, k, 3:5] = st.body_velocity
+                out[p, k, 5] = st.yaw_rate
+            ok[p] = True
+        except ConvergenceError:
+            out[p] = np.nan
+    return out, ok
+
+
+def _library_task(spec_json: dict, start: int, stop: int) -> dict:
+    """Batch task: transitions of initial states ``start:stop`` (see batch.run_chunked)."""
+    sim = _simulator(spec_json)
+    states = np.asarray(spec_json["initial_states"])[start:stop]
+    n_samples = int(round(spec_json["horizon_s"] / spec_json["sample_interval_s"])) + 1
+    trans = np.empty((len(states), len(PRIMITIVE_NAMES), n_samples, 6), dtype=np.float32)
+    conv = np.empty((len(states), len(PRIMITIVE_NAMES)), dtype=bool)
+    for i, state in enumerate(states):
+        t, ok = simulate_transitions(sim, state, spec_json["horizon_s"],
+                                     spec_json["sample_interval_s"])
+        trans[i], conv[i] = t.astype(np.float32), ok
+    return {"transitions": trans, "converged": conv}
+
+
+def _code_version() -> str:
+    try:
+        from importlib.metadata import version
+        v = version("frog_sim")
+    except Exception:
+        v = "unknown"
+    try:
+        import subprocess
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                             text=True, cwd=Path(__file__).parent, timeout=5).stdout.strip()
+    except Exception:
+        rev = ""
+    return f"frog_sim {v}" + (f" (git {rev})" if rev else "")
+
+
+def generate_library(spec: LibrarySpec, out_path, work_dir=None, workers: Optional[int] = None,
+                     scheduler: Optional[str] = None, progress: bool = True,
+                     chunk_size: int = 25) -> Path:
+    """Simulate the library and write it (atomically) to ``out_path``.
+
+    Chunks go to ``work_dir`` (default ``<out_path>.chunks``) so an interrupted run resumes;
+    the result is bit-identical for any ``workers`` / ``scheduler``.
+
+    Returns
+    -------
+    Path
+        ``out_path``.
+    """
+    spec.validate()
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    states = sample_initial_states(spec)
+    spec_json = spec.as_json()
+    task_spec = dict(spec_json, initial_states=states)
+    work = Path(work_dir) if work_dir else out_path.with_name(out_path.name + ".chunks")
+    t0 = time.perf_counter()
+    arrays = run_chunked(_library_task, task_spec, spec.n_states, chunk_size, work,
+                         workers=workers, scheduler=scheduler, progress=progress,
+                         desc="library states")
+    elapsed = time.perf_counter() - t0
+    transitions = np.ascontiguousarray(arrays["transitions"].transpose(1, 0, 2, 3))
+    converged = np.ascontiguousarray(arrays["converged"].T)
+    times = np.arange(transitions.shape[2]) * spec.sample_interval
+    robot = spec_json["params"]
+    metadata = {
+        "units": {"initial_states": ["m/s", "m/s", "rad/s"],
+                  "transitions": ["m", "m", "rad", "m/s", "m/s", "rad/s"], "times": "s"},
+        "horizon_s": spec.horizon, "sample_interval_s": spec.sample_interval,
+        "sampling": {"seed": spec.seed, "distribution": "uniform",
+                     "forward_velocity_range": spec_json["forward_velocity_range"],
+                     "lateral_velocity_range": spec_json["lateral_velocity_range"],
+                     "yaw_rate_range": spec_json["yaw_rate_range"]},
+        "robot": robot,
+        "robot_hash": spec_hash({"robot": robot, "time_step_s": spec_json["time_step_s"]}),
+        "actuation": {"pulse_duration_s": robot.get("pulse_duration"),
+                      "profile": _simulator(spec_json).metadata().get("profile")},
+        "time_step_s": spec_json["time_step_s"],
+        "code_version": _code_version(),
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "generation_wall_time_s": elapsed,
+    }
+    atomic_save_npz(out_path, {
+        "format": np.array(FORMAT), "format_version": np.array(FORMAT_VERSION),
+        "primitive_names": np.array(PRIMITIVE_NAMES),
+        "primitive_bits": np.array([PRIMITIVE_BITS[n] for n in PRIMITIVE_NAMES]),
+        "state_names": np.array(STATE_NAMES), "initial_states": states,
+        "times": times, "transition_names": np.array(TRANSITION_NAMES),
+        "transitions": transitions, "converged": converged,
+        "metadata": np.array(json.dumps(metadata))})
+    return out_path
+
+
+_REQUIRED = ("format", "format_version", "primitive_names", "primitive_bits", "state_names",
+             "initial_states", "times", "transition_names", "transitions", "converged",
+             "metadata")
+
+
+def load_library(path) -> dict:
+    """Load and validate a library file; return its arrays plus parsed ``metadata``.
+
+    Raises
+    ------
+    LibraryFileError
+        Naming the problem: missing/unreadable/truncated file, foreign format, version,
+        missing keys, inconsistent shapes, non-uniform times, non-finite converged rows.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise LibraryFileError(f"library file {str(path)!r} does not exist")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, EOFError, ValueError, OSError) as exc:
+        raise LibraryFileError(f"{str(path)!r} is not a readable .npz library (truncated or "
+                               f"foreign file?): {exc}") from exc
+    missing = [k for k in _REQUIRED if k not in data]
+    if missing:
+        raise LibraryFileError(f"{str(path)!r} lacks {missing}; not a {FORMAT} file")
+    if str(data["format"]) != FORMAT:
+        raise LibraryFileError(f"{str(path)!r} has format {str(data['format'])!r}, "
+                               f"expected {FORMAT!r}")
+    if int(data["format_version"]) != FORMAT_VERSION:
+        raise LibraryFileError(f"{str(path)!r} is format version {int(data['format_version'])}, "
+                               f"this code reads {FORMAT_VERSION}")
+    tr, st, times, conv = data["transitions"], data["initial_states"], data["times"], data["converged"]
+    p, n = len(data["primitive_names"]), len(st)
+    if tr.shape != (p, n, len(times), 6) or conv.shape != (p, n) or st.shape != (n, 3):
+        raise LibraryFileError(f"{str(path)!r} has inconsistent shapes: transitions {tr.shape}, "
+                               f"initial_states {st.shape}, times {times.shape}, converged {conv.shape}")
+    steps = np.diff(times)
+    if len(times) < 2 or times[0] != 0 or not np.allclose(steps, steps[0]) or steps[0] <= 0:
+        raise LibraryFileError(f"{str(path)!r}: times must start at 0 and be uniformly increasing")
+    if not np.all(np.isfinite(tr[conv])):
+        raise LibraryFileError(f"{str(path)!r}: non-finite values in converged transitions")
+    data["metadata"] = json.loads(str(data["metadata"]))
+    return data
