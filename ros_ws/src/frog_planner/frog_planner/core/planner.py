@@ -1,0 +1,183 @@
+"""Receding-horizon primitive planner (paper seed 000, Algorithm 1): one decision per period.
+
+The planner keeps one piece of state, the progress along the path, which only moves
+forward: each decision searches the path a window ahead of the previous progress.
+A ROS node or an evaluator calls :meth:`Planner.decide` once per period T and sends
+``Decision.primitive_id``; :class:`Decision` carries everything a status message needs.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .transition_model import world_to_body_velocity
+from .tree_search import MAX_DEPTH, CostWeights, path_cost, search
+
+
+@dataclass(frozen=True)
+class CostTerms:
+    """The weighted terms of eq. 19 (dimensionless cost units).
+
+    Attributes
+    ----------
+    distance : float
+        w_a * distance to path.
+    heading : float
+        w_b * |heading error| (rad).
+    progress : float
+        w_c * (1 - progress).
+    """
+
+    distance: float
+    heading: float
+    progress: float
+
+    @classmethod
+    def from_array(cls, terms):
+        """From an array of shape (3,)."""
+        return cls(float(terms[0]), float(terms[1]), float(terms[2]))
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One planner decision.
+
+    Attributes
+    ----------
+    primitive_id : int
+        Id 0..P-1 of the primitive to execute now.
+    name : str
+        Its name (``A``..``I``).
+    total_cost : float
+        Eq. 19 at the leaf of the chosen sequence.
+    cost_terms : CostTerms
+        Weighted terms at that leaf.
+    predicted_pose : numpy.ndarray, shape (3,)
+        World pose (x m, y m, heading rad) predicted one period after executing the primitive.
+    progress : float
+        Progress of the measured pose along the path, in [0, 1], never decreasing.
+    distance_to_path : float
+        Distance in m from the measured position to the path (within the progress window).
+    current_cost : float
+        Eq. 19 at the measured pose (the quantity plotted in the paper's Fig. S3).
+    current_cost_terms : CostTerms
+        Its weighted terms.
+    sequence : tuple of int
+        The chosen primitive sequence (length = depth).
+    goal_reached : bool
+        Whether the measured pose has reached the end of the path.
+    """
+
+    primitive_id: int
+    name: str
+    total_cost: float
+    cost_terms: CostTerms
+    predicted_pose: np.ndarray
+    progress: float
+    distance_to_path: float
+    current_cost: float
+    current_cost_terms: CostTerms
+    sequence: tuple
+    goal_reached: bool
+
+
+def _vector(value, name, unit):
+    v = np.asarray(value, dtype=float).reshape(-1)
+    if v.shape != (3,):
+        raise ValueError(f"{name} has {v.size} values; expected 3 ({unit})")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} {v.tolist()} is not finite; expected 3 finite values ({unit})")
+    return v
+
+
+class Planner:
+    """Library-backed receding-horizon planner following one path.
+
+    Parameters
+    ----------
+    model : frog_planner.core.transition_model.TransitionModel
+    path : frog_planner.core.paths.Path
+    weights : CostWeights
+        Eq. 19 weights (default: the paper's 500, 50, 300).
+    depth : int
+        Search depth H, 1-5 (the paper found 1 best on hardware).
+
+    Examples
+    --------
+    >>> planner = Planner(TransitionModel.load("library.npz", period=1.5), ellipse_path())  # doctest: +SKIP
+    >>> decision = planner.decide(pose=[0, 0, 0], body_velocity=[0.02, 0, 0])             # doctest: +SKIP
+    >>> decision.primitive_id, decision.name                                                  # doctest: +SKIP
+    (1, 'B')
+    """
+
+    def __init__(self, model, path, weights=CostWeights(), depth=1):
+        if not isinstance(weights, CostWeights):
+            weights = CostWeights(*weights)
+        depth = int(depth)
+        if not 1 <= depth <= MAX_DEPTH:
+            raise ValueError(f"search depth {depth} is out of range; expected 1-{MAX_DEPTH}")
+        self.model = model
+        self.path = path
+        self.weights = weights
+        self.depth = depth
+        self._progress = 0.0
+
+    @property
+    def progress(self):
+        """Current progress in [0, 1] (monotone)."""
+        return self._progress
+
+    def reset(self, progress=0.0):
+        """Start over (new run) from ``progress`` in [0, 1]."""
+        if not 0.0 <= progress <= 1.0:
+            raise ValueError(f"progress {progress} must be in [0, 1]")
+        self._progress = float(progress)
+
+    def decide(self, pose, body_velocity):
+        """Choose the primitive to execute now (Algorithm 1).
+
+        Parameters
+        ----------
+        pose : array_like, shape (3,)
+            Measured world pose: x m, y m, heading rad.
+        body_velocity : array_like, shape (3,)
+            Measured body velocity: forward m/s, lateral m/s, yaw rate rad/s
+            (nav_msgs/Odometry twist, which is in the child (body) frame).
+
+        Returns
+        -------
+        Decision
+
+        Raises
+        ------
+        ValueError
+            If pose or velocity are not 3 finite values (the planner state is unchanged).
+        """
+        pose = _vector(pose, "pose", "x m, y m, heading rad")
+        body_velocity = _vector(body_velocity, "body velocity", "forward m/s, lateral m/s, yaw rate rad/s")
+        now = path_cost(self.path, pose, self.weights, self._progress)
+        self._progress = max(self._progress, float(now.progress[0]))
+        result = search(self.model, self.path, pose, body_velocity, self.depth, self.weights, self._progress)
+        first = result.first_action
+        return Decision(
+            primitive_id=int(first), name=self.model.primitive_names[first], total_cost=result.total_cost,
+            cost_terms=CostTerms.from_array(result.leaf_cost.terms[result.best_leaf]),
+            predicted_pose=result.first_poses[first].copy(), progress=self._progress,
+            distance_to_path=float(now.distance[0]), current_cost=float(now.total[0]),
+            current_cost_terms=CostTerms.from_array(now.terms[0]), sequence=result.sequence,
+            goal_reached=self.path.goal_reached(pose, self._progress))
+
+    def decide_from_world_state(self, state):
+        """:meth:`decide` from a world-frame state [x, y, theta, x_dot, y_dot, theta_dot] (Algorithm 1 step 5).
+
+        Parameters
+        ----------
+        state : array_like, shape (6,)
+            m, m, rad, m/s, m/s, rad/s; the planar velocity is in the world frame and is
+            rotated by -theta into the body frame.
+        """
+        s = np.asarray(state, dtype=float).reshape(-1)
+        if s.shape != (6,):
+            raise ValueError(f"state has {s.size} values; expected 6 (x, y, theta, x_dot, y_dot, theta_dot)")
+        body = world_to_body_velocity(s[2], s[3:5])
+        return self.decide(s[:3], [body[0], body[1], s[5]])

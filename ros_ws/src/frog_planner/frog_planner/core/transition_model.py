@@ -1,0 +1,226 @@
+"""Library-backed transition model: nearest initial state -> the nine primitives' transitions.
+
+Paper seed 000, Algorithm 1 steps 5-9 and eq. 14. All velocities are SI: forward and lateral
+in m/s, yaw rate in rad/s (the authors' code mixed deg/s and rad/s; this module never does).
+
+Two neighbour metrics over the library's initial body velocities v_k = (u_k, v_k, w_k):
+
+- ``"euclidean"`` (default): || (v - v_k) / scale || on a scipy cKDTree, ``scale`` per
+  component (default: the sampled range of each component, so each spans about 1).
+- ``"relative"``: Algorithm 1 step 6, d_k = || (v - v_k) / v ||, with each denominator
+  guarded as max(|v_i|, relative_floor * scale_i) so a near-zero velocity does not divide by 0.
+
+With ``k > 1`` the transitions of the k nearest states are averaged (heading as a circular mean).
+"""
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .library_file import load_motion_library
+
+METRICS = ("euclidean", "relative")
+_RELATIVE_CHUNK = 64  # queries per block in the brute-force relative metric (bounds memory)
+
+
+def world_to_body_velocity(heading, world_velocity):
+    """Rotate world-frame planar velocities into the body frame (Algorithm 1 step 5: R(-theta)).
+
+    Parameters
+    ----------
+    heading : float or array_like, shape (...)
+        Body heading theta in rad (world frame).
+    world_velocity : array_like, shape (..., 2)
+        (x_dot, y_dot) in m/s, world frame.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 2)
+        (forward, lateral) velocity in m/s.
+    """
+    th = np.asarray(heading, dtype=float)
+    v = np.asarray(world_velocity, dtype=float)
+    c, s = np.cos(th), np.sin(th)
+    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+
+def body_to_world_velocity(heading, body_velocity):
+    """Rotate body-frame planar velocities into the world frame (R(theta)); inverse of the above."""
+    th = np.asarray(heading, dtype=float)
+    v = np.asarray(body_velocity, dtype=float)
+    c, s = np.cos(th), np.sin(th)
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+
+class TransitionModel:
+    """Transitions after one period T from the nearest library initial state(s).
+
+    Parameters
+    ----------
+    initial_states : array_like, shape (N, 3)
+        Initial body velocities (m/s, m/s, rad/s).
+    transitions : array_like, shape (P, N, 6)
+        State after T from each initial state under each primitive: x, y m and heading rad in
+        the start body frame; forward, lateral m/s and yaw rate rad/s in the body frame at T.
+        Rows with any non-finite value (failed simulations) drop that initial state.
+    primitive_names : sequence of str, length P
+    primitive_bits : sequence of str, length P, optional
+    period : float, optional
+        T in s (informational; the transitions already are for T).
+    metric : {"euclidean", "relative"}
+    k : int
+        Number of neighbours averaged, 1 <= k <= N.
+    scale : array_like, shape (3,), optional
+        Per-component scale (m/s, m/s, rad/s); default: range of each component of the
+        initial states (1 where a component is constant).
+    relative_floor : float
+        Floor of the relative metric's denominators, as a fraction of ``scale``.
+    source : str
+        Where the model came from (for messages).
+
+    Raises
+    ------
+    ValueError
+        On bad shapes, an unknown metric, k out of range, non-positive scale, or when no
+        initial state has a finite transition for every primitive.
+    """
+
+    def __init__(self, initial_states, transitions, primitive_names, primitive_bits=None, period=None,
+                 metric="euclidean", k=1, scale=None, relative_floor=0.05, source=""):
+        init = np.asarray(initial_states, dtype=float)
+        trans = np.asarray(transitions, dtype=float)
+        if init.ndim != 2 or init.shape[1] != 3:
+            raise ValueError(f"initial_states has shape {init.shape}; expected (N, 3)")
+        if trans.ndim != 3 or trans.shape[1:] != (init.shape[0], 6):
+            raise ValueError(f"transitions has shape {trans.shape}; expected (P, {init.shape[0]}, 6)")
+        names = [str(n) for n in primitive_names]
+        if len(names) != trans.shape[0]:
+            raise ValueError(f"{len(names)} primitive names for {trans.shape[0]} primitives")
+        if metric not in METRICS:
+            raise ValueError(f"metric {metric!r} is unknown; expected one of {list(METRICS)}")
+        usable = np.all(np.isfinite(trans), axis=(0, 2)) & np.all(np.isfinite(init), axis=1)
+        if not np.any(usable):
+            raise ValueError(f"{source or 'library'}: no initial state has a finite transition for every primitive")
+        self.dropped_states = int(np.count_nonzero(~usable))
+        self.initial_states = init[usable]
+        self.transitions = np.ascontiguousarray(trans[:, usable, :])
+        n = self.initial_states.shape[0]
+        if not 1 <= int(k) <= n:
+            raise ValueError(f"k {k} is out of range; expected 1 <= k <= {n} (usable initial states)")
+        if scale is None:
+            scale = np.ptp(self.initial_states, axis=0)
+            scale = np.where(scale > 0.0, scale, 1.0)
+        scale = np.asarray(scale, dtype=float)
+        if scale.shape != (3,) or not np.all(scale > 0.0):
+            raise ValueError(f"scale {scale.tolist()} must be 3 positive values (m/s, m/s, rad/s)")
+        if not relative_floor > 0.0:
+            raise ValueError(f"relative_floor {relative_floor} must be > 0")
+        self.primitive_names = names
+        self.primitive_bits = None if primitive_bits is None else [str(b) for b in primitive_bits]
+        self.period = None if period is None else float(period)
+        self.metric = metric
+        self.k = int(k)
+        self.scale = scale
+        self.relative_floor = float(relative_floor)
+        self.source = str(source)
+        self._tree = cKDTree(self.initial_states / scale) if metric == "euclidean" else None
+        # Primitive-major -> state-major copy so one gather returns all P transitions of a state.
+        self._by_state = np.ascontiguousarray(np.transpose(self.transitions, (1, 0, 2)))  # (N, P, 6)
+
+    @classmethod
+    def load(cls, path, period=1.5, metric="euclidean", k=1, scale=None, relative_floor=0.05):
+        """Transition model from a library file for period T (see :func:`load_motion_library`).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+        period : float
+            T in s; any multiple of the file's sample interval up to its horizon.
+        metric, k, scale, relative_floor
+            As for :class:`TransitionModel`.
+
+        Raises
+        ------
+        FileNotFoundError, LibraryFormatError, ValueError
+        """
+        return cls.from_library(load_motion_library(path), period, metric, k, scale, relative_floor)
+
+    @classmethod
+    def from_library(cls, library, period=1.5, metric="euclidean", k=1, scale=None, relative_floor=0.05):
+        """Transition model from a :class:`MotionLibrary` for period T in s."""
+        return cls(library.initial_states, library.transitions_at(period), library.primitive_names,
+                   library.primitive_bits, period, metric, k, scale, relative_floor, library.source)
+
+    @property
+    def n_primitives(self):
+        """Number of primitives P."""
+        return self.transitions.shape[0]
+
+    @property
+    def n_states(self):
+        """Number of usable initial states N."""
+        return self.initial_states.shape[0]
+
+    def primitive_id(self, name):
+        """Id (index) of a primitive name; raises ValueError naming the known ones."""
+        try:
+            return self.primitive_names.index(str(name))
+        except ValueError:
+            raise ValueError(f"primitive {name!r} is unknown; expected one of {self.primitive_names}") from None
+
+    def nearest(self, body_velocities):
+        """Indices of the k nearest initial states (Algorithm 1 steps 6-7).
+
+        Parameters
+        ----------
+        body_velocities : array_like, shape (M, 3) or (3,)
+            Query body velocities (forward m/s, lateral m/s, yaw rate rad/s).
+
+        Returns
+        -------
+        indices : numpy.ndarray, shape (M, k), int
+            Into ``initial_states``, nearest first.
+        distances : numpy.ndarray, shape (M, k)
+            Metric values (dimensionless).
+        """
+        q = np.atleast_2d(np.asarray(body_velocities, dtype=float))
+        if q.shape[-1] != 3:
+            raise ValueError(f"body velocities have shape {q.shape}; expected (M, 3)")
+        if self.metric == "euclidean":
+            dist, idx = self._tree.query(q / self.scale, k=self.k)
+            return idx.reshape(len(q), self.k), dist.reshape(len(q), self.k)
+        idx = np.empty((len(q), self.k), dtype=np.intp)
+        dist = np.empty((len(q), self.k))
+        floor = self.relative_floor * self.scale
+        for lo in range(0, len(q), _RELATIVE_CHUNK):
+            block = q[lo:lo + _RELATIVE_CHUNK]
+            denom = np.maximum(np.abs(block), floor)                         # guarded v_i
+            d = np.sqrt(np.sum(((block[:, None, :] - self.initial_states[None]) / denom[:, None, :]) ** 2, axis=-1))
+            if self.k == 1:
+                part = np.argmin(d, axis=1)[:, None]
+            else:
+                part = np.argpartition(d, self.k - 1, axis=1)[:, :self.k]
+                order = np.argsort(np.take_along_axis(d, part, axis=1), axis=1)
+                part = np.take_along_axis(part, order, axis=1)
+            idx[lo:lo + len(block)] = part
+            dist[lo:lo + len(block)] = np.take_along_axis(d, part, axis=1)
+        return idx, dist
+
+    def lookup(self, body_velocities):
+        """Transitions of every primitive from the nearest initial state(s) (Algorithm 1 step 9).
+
+        Parameters
+        ----------
+        body_velocities : array_like, shape (M, 3) or (3,)
+
+        Returns
+        -------
+        numpy.ndarray, shape (M, P, 6)
+            Mean over the k neighbours; heading (column 2) as a circular mean.
+        """
+        idx, _ = self.nearest(body_velocities)
+        if self.k == 1:
+            return self._by_state[idx[:, 0]]
+        rows = self._by_state[idx]                                           # (M, k, P, 6)
+        out = rows.mean(axis=1)
+        out[..., 2] = np.arctan2(np.sin(rows[..., 2]).mean(axis=1), np.cos(rows[..., 2]).mean(axis=1))
+        return out

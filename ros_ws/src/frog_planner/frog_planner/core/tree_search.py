@@ -1,0 +1,195 @@
+"""Cost (eq. 19) and exhaustive tree search over primitive sequences (Algorithm 1).
+
+All P^H action sequences of depth H are expanded level by level as arrays: level d holds
+P^d predicted states, one nearest-neighbour query per state and one eq. 18 update for all
+P children at once. The cost is evaluated at the leaves (Algorithm 1 step 15) and the first
+action of the cheapest leaf is returned. Leaf i encodes the sequence of its base-P digits,
+most significant first, so ties go to the lexicographically smallest sequence.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .paths import wrap_angle
+from .prediction import apply_transition
+
+MAX_DEPTH = 5
+
+
+@dataclass(frozen=True)
+class CostWeights:
+    """Weights of eq. 19 (paper: w_a = 500, w_b = 50, w_c = 300).
+
+    Attributes
+    ----------
+    distance : float
+        w_a, per m of distance to the path.
+    heading : float
+        w_b, per rad of heading error against the path tangent.
+    progress : float
+        w_c, per unit of missing progress (1 - s_c).
+    """
+
+    distance: float = 500.0
+    heading: float = 50.0
+    progress: float = 300.0
+
+    def __post_init__(self):
+        for name in ("distance", "heading", "progress"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0.0):
+                raise ValueError(f"cost weight {name} = {value} must be a finite number >= 0")
+
+
+@dataclass(frozen=True)
+class PathCost:
+    """Eq. 19 evaluated for M poses.
+
+    Attributes
+    ----------
+    total : numpy.ndarray, shape (M,)
+        C = w_a d + w_b |heading error| + w_c (1 - s_c).
+    terms : numpy.ndarray, shape (M, 3)
+        The three weighted terms (distance, heading, progress).
+    distance : numpy.ndarray, shape (M,)
+        d in m.
+    heading_error : numpy.ndarray, shape (M,)
+        |wrap(theta - path tangent)| in rad, in [0, pi].
+    progress : numpy.ndarray, shape (M,)
+        s_c in [0, 1].
+    """
+
+    total: np.ndarray
+    terms: np.ndarray
+    distance: np.ndarray
+    heading_error: np.ndarray
+    progress: np.ndarray
+
+
+def path_cost(path, poses, weights, previous_progress=0.0):
+    """Cost of eq. 19 for poses against a path, closest point searched ahead of ``previous_progress``.
+
+    Parameters
+    ----------
+    path : frog_planner.core.paths.Path
+    poses : array_like, shape (M, 3) or (3,)
+        x m, y m, heading rad (world frame).
+    weights : CostWeights
+    previous_progress : float
+        Progress in [0, 1] from which the closest point is searched (monotone progress).
+
+    Returns
+    -------
+    PathCost
+    """
+    p = np.atleast_2d(np.asarray(poses, dtype=float))
+    proj = path.project(p[:, :2], previous_progress)
+    heading_error = np.abs(wrap_angle(p[:, 2] - proj.tangent_heading))
+    terms = np.column_stack([weights.distance * proj.distance, weights.heading * heading_error,
+                             weights.progress * (1.0 - proj.progress)])
+    return PathCost(total=terms.sum(axis=1), terms=terms, distance=proj.distance,
+                    heading_error=heading_error, progress=proj.progress)
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    """Outcome of a tree search.
+
+    Attributes
+    ----------
+    sequence : tuple of int
+        Primitive ids of the cheapest sequence, first action first (length H).
+    leaf_cost : PathCost
+        Eq. 19 at every leaf (P^H entries, leaf i = base-P digits of i).
+    leaf_poses : numpy.ndarray, shape (P^H, 3)
+        Predicted world poses after H periods.
+    first_poses : numpy.ndarray, shape (P, 3)
+        Predicted world pose after one period for each first action.
+    best_leaf : int
+        Index of the cheapest leaf.
+    """
+
+    sequence: tuple
+    leaf_cost: PathCost
+    leaf_poses: np.ndarray
+    first_poses: np.ndarray
+    best_leaf: int
+
+    @property
+    def first_action(self):
+        """Primitive id to execute now (Algorithm 1 steps 16-17)."""
+        return self.sequence[0]
+
+    @property
+    def total_cost(self):
+        """Cost of the cheapest leaf."""
+        return float(self.leaf_cost.total[self.best_leaf])
+
+
+def expand_tree(model, pose, body_velocity, depth):
+    """Predict the leaves of all P^H sequences (Algorithm 1 steps 5-14, vectorised).
+
+    Parameters
+    ----------
+    model : frog_planner.core.transition_model.TransitionModel
+    pose : array_like, shape (3,)
+        Current world pose (x m, y m, heading rad).
+    body_velocity : array_like, shape (3,)
+        Current body velocity (forward m/s, lateral m/s, yaw rate rad/s).
+    depth : int
+        H, 1 <= H <= 5.
+
+    Returns
+    -------
+    leaf_poses : numpy.ndarray, shape (P^H, 3)
+    first_poses : numpy.ndarray, shape (P, 3)
+    """
+    depth = int(depth)
+    if not 1 <= depth <= MAX_DEPTH:
+        raise ValueError(f"search depth {depth} is out of range; expected 1-{MAX_DEPTH}")
+    poses = np.asarray(pose, dtype=float).reshape(1, 3)
+    velocities = np.asarray(body_velocity, dtype=float).reshape(1, 3)
+    first = None
+    for _ in range(depth):
+        trans = model.lookup(velocities)                               # (M, P, 6)
+        poses, velocities = apply_transition(poses[:, None, :], trans)  # (M, P, 3) each, eq. 18
+        poses = poses.reshape(-1, 3)
+        velocities = velocities.reshape(-1, 3)
+        if first is None:
+            first = poses.copy()
+    return poses, first
+
+
+def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), previous_progress=0.0):
+    """Cheapest of all P^H primitive sequences under eq. 19 (Algorithm 1).
+
+    Parameters
+    ----------
+    model : frog_planner.core.transition_model.TransitionModel
+    path : frog_planner.core.paths.Path
+    pose : array_like, shape (3,)
+        Current world pose (x m, y m, heading rad).
+    body_velocity : array_like, shape (3,)
+        Current body velocity (forward m/s, lateral m/s, yaw rate rad/s).
+    depth : int
+        H, 1 <= H <= 5.
+    weights : CostWeights
+    previous_progress : float
+        The current progress in [0, 1]; leaves' progress is searched ahead of it.
+
+    Returns
+    -------
+    SearchResult
+    """
+    leaves, first = expand_tree(model, pose, body_velocity, depth)
+    cost = path_cost(path, leaves, weights, previous_progress)
+    best = int(np.argmin(cost.total))
+    n_prim = model.n_primitives
+    digits = []
+    rest = best
+    for _ in range(int(depth)):
+        digits.append(rest % n_prim)
+        rest //= n_prim
+    return SearchResult(sequence=tuple(reversed(digits)), leaf_cost=cost, leaf_poses=leaves,
+                        first_poses=first, best_leaf=best)
