@@ -102,7 +102,7 @@ class PathProjection:
     distance : numpy.ndarray, shape (M,)
         Distance in m from the position to that closest point.
     tangent_heading : numpy.ndarray, shape (M,)
-        Heading of the path tangent at that point, rad.
+        Heading of the path tangent at that point, rad (``tangent_headings`` interpolated by arc length).
     closest_point : numpy.ndarray, shape (M, 2)
         The closest point, m.
     """
@@ -169,7 +169,7 @@ class Path:
         self.length = float(self.arc_length[-1])
         grad = np.gradient(self.points, axis=0, edge_order=2 if len(self.points) > 2 else 1)
         self.tangent_headings = np.arctan2(grad[:, 1], grad[:, 0])
-        self._segment_heading = np.arctan2(seg[:, 1], seg[:, 0])
+        self._unwrapped_tangent = np.unwrap(self.tangent_headings)
 
     @classmethod
     def from_points(cls, points, **kwargs):
@@ -191,8 +191,6 @@ class Path:
             Vertices in m (first is exactly the point at ``previous_progress``).
         vertex_arc : numpy.ndarray, shape (W + 1,)
             Their arc length in m.
-        segment_heading : numpy.ndarray, shape (W,)
-            Heading of each window segment, rad.
         """
         s0 = float(np.clip(previous_progress, 0.0, 1.0)) * self.length
         s1 = min(s0 + self.progress_window, self.length)
@@ -200,10 +198,12 @@ class Path:
         arc = np.concatenate([[s0], self.arc_length[inner], [s1]])
         verts = np.column_stack([np.interp(arc, self.arc_length, self.points[:, 0]),
                                  np.interp(arc, self.arc_length, self.points[:, 1])])
-        # Segment headings from the original segments, so a zero-length window still has one.
-        mid = 0.5 * (arc[:-1] + arc[1:])
-        idx = np.clip(np.searchsorted(self.arc_length, mid, side="right") - 1, 0, len(self._segment_heading) - 1)
-        return verts, arc, self._segment_heading[idx]
+        return verts, arc
+
+    def tangent_heading_at(self, progress):
+        """Tangent heading in rad at progress in [0, 1]: ``tangent_headings`` interpolated along the arc."""
+        s = np.clip(np.asarray(progress, dtype=float), 0.0, 1.0) * self.length
+        return wrap_angle(np.interp(s, self.arc_length, self._unwrapped_tangent))
 
     def project(self, positions, previous_progress=0.0):
         """Closest points of ``positions`` on the path window ahead of ``previous_progress``.
@@ -225,7 +225,7 @@ class Path:
             Arrays of shape (M,) (or scalars' shape (1,) for a single position).
         """
         pos = np.atleast_2d(np.asarray(positions, dtype=float))[:, :2]
-        verts, arc, heading = self.window(previous_progress)
+        verts, arc = self.window(previous_progress)
         a = verts[:-1]                      # (W, 2)
         d = verts[1:] - a                   # (W, 2)
         seg_len2 = np.einsum("ij,ij->i", d, d)
@@ -237,8 +237,10 @@ class Path:
         best = np.argmin(dist2, axis=1)
         rows = np.arange(len(pos))
         s = arc[best] + t[rows, best] * (arc[best + 1] - arc[best])
+        # The tangent is interpolated along the arc, so it is continuous across vertices.
         return PathProjection(progress=s / self.length, distance=np.sqrt(dist2[rows, best]),
-                              tangent_heading=heading[best], closest_point=closest[rows, best])
+                              tangent_heading=wrap_angle(np.interp(s, self.arc_length, self._unwrapped_tangent)),
+                              closest_point=closest[rows, best])
 
     def progress_of(self, point, previous_progress=0.0):
         """Progress in [0, 1] of one position, searched ahead of ``previous_progress`` (monotone).

@@ -1,0 +1,136 @@
+"""Nearest-neighbour lookup against brute force, both metrics, k > 1, and loading with a period."""
+
+import math
+
+import numpy as np
+import pytest
+
+from frog_planner.core.transition_model import TransitionModel
+
+RNG_SEED = 11
+
+
+def _random_model_arrays(n_states=300, n_prim=9, seed=RNG_SEED):
+    rng = np.random.default_rng(seed)
+    init = np.column_stack([rng.uniform(0.0, 0.04, n_states), rng.uniform(-0.03, 0.03, n_states),
+                            rng.uniform(-0.52, 0.52, n_states)])
+    trans = rng.normal(0.0, 0.05, (n_prim, n_states, 6))
+    trans[..., 2] = rng.uniform(-math.pi, math.pi, (n_prim, n_states))
+    return init, trans
+
+
+def _queries(n=60, seed=5):
+    rng = np.random.default_rng(seed)
+    q = np.column_stack([rng.uniform(-0.005, 0.045, n), rng.uniform(-0.035, 0.035, n), rng.uniform(-0.6, 0.6, n)])
+    q[0] = [0.0, 0.0, 0.0]          # at rest: the relative metric's denominators are all guarded
+    q[1] = [0.02, 0.0, 1e-9]        # one near-zero component
+    return q
+
+
+def _brute_force(init, query, metric, k, scale, floor_fraction=0.05):
+    """k nearest by explicit loops over the states (Algorithm 1 step 6 for 'relative')."""
+    dists = []
+    for i, state in enumerate(init):
+        total = 0.0
+        for c in range(3):
+            if metric == "euclidean":
+                denom = scale[c]
+            else:
+                denom = max(abs(query[c]), floor_fraction * scale[c])
+            total += ((query[c] - state[c]) / denom) ** 2
+        dists.append((math.sqrt(total), i))
+    dists.sort()
+    return [i for _, i in dists[:k]], [d for d, _ in dists[:k]]
+
+
+@pytest.mark.parametrize("metric", ["euclidean", "relative"])
+@pytest.mark.parametrize("k", [1, 4])
+def test_nearest_matches_brute_force(metric, k):
+    init, trans = _random_model_arrays()
+    model = TransitionModel(init, trans, list("ABCDEFGHI"), metric=metric, k=k)
+    scale = [np.ptp(init[:, c]) for c in range(3)]
+    queries = _queries()
+    idx, dist = model.nearest(queries)
+    assert idx.shape == (len(queries), k)
+    for q, got_idx, got_dist in zip(queries, idx, dist):
+        want_idx, want_dist = _brute_force(init, q, metric, k, scale)
+        assert list(got_idx) == want_idx
+        np.testing.assert_allclose(got_dist, want_dist, rtol=1e-9)
+        assert np.all(np.isfinite(got_dist))
+
+
+def test_relative_metric_is_algorithm1_step6_away_from_the_guard():
+    init, trans = _random_model_arrays(50)
+    model = TransitionModel(init, trans, list("ABCDEFGHI"), metric="relative")
+    q = np.array([0.03, -0.02, 0.4])    # every component well above its floor
+    d_paper = np.linalg.norm((q - init) / q, axis=1)
+    assert model.nearest(q)[0][0, 0] == int(np.argmin(d_paper))
+
+
+def test_lookup_returns_the_neighbours_transitions_and_averages_k():
+    init, trans = _random_model_arrays()
+    q = _queries(5)
+    one = TransitionModel(init, trans, list("ABCDEFGHI"), k=1)
+    got = one.lookup(q)
+    assert got.shape == (5, 9, 6)
+    scale = [np.ptp(init[:, c]) for c in range(3)]
+    for m in range(5):
+        (n,), _ = _brute_force(init, q[m], "euclidean", 1, scale)
+        np.testing.assert_array_equal(got[m], trans[:, n, :])
+    three = TransitionModel(init, trans, list("ABCDEFGHI"), k=3)
+    got = three.lookup(q)
+    for m in range(5):
+        ns, _ = _brute_force(init, q[m], "euclidean", 3, scale)
+        for p in range(9):
+            rows = trans[p, ns, :]
+            np.testing.assert_allclose(got[m, p, [0, 1, 3, 4, 5]], rows[:, [0, 1, 3, 4, 5]].mean(axis=0))
+            sin_mean, cos_mean = np.sin(rows[:, 2]).sum(), np.cos(rows[:, 2]).sum()
+            assert got[m, p, 2] == pytest.approx(math.atan2(sin_mean, cos_mean))
+
+
+def test_averaging_headings_across_pi_stays_near_pi():
+    init = np.array([[0.01, 0.0, 0.0], [0.011, 0.0, 0.0], [0.03, 0.0, 0.3]])
+    trans = np.zeros((1, 3, 6))
+    trans[0, :, 2] = [3.1, -3.1, 0.0]
+    model = TransitionModel(init, trans, ["A"], k=2)
+    heading = model.lookup([0.0105, 0.0, 0.0])[0, 0, 2]
+    assert abs(abs(heading) - math.pi) < 1e-9          # not 0, the naive mean
+
+
+def test_failed_simulations_drop_their_initial_state():
+    init, trans = _random_model_arrays(20)
+    target = init[7].copy()
+    trans[3, 7, :] = np.nan
+    model = TransitionModel(init, trans, list("ABCDEFGHI"))
+    assert model.n_states == 19 and model.dropped_states == 1
+    idx, _ = model.nearest(target)
+    assert not np.allclose(model.initial_states[idx[0, 0]], target)
+    assert np.all(np.isfinite(model.lookup(target)))
+
+
+@pytest.mark.parametrize("kwargs, words", [({"metric": "manhattan"}, "metric 'manhattan' is unknown"),
+                                           ({"k": 0}, "k 0 is out of range"), ({"k": 301}, "k 301 is out of range"),
+                                           ({"scale": [1.0, 0.0, 1.0]}, "scale")])
+def test_bad_settings_are_rejected(kwargs, words):
+    init, trans = _random_model_arrays()
+    with pytest.raises(ValueError, match=words):
+        TransitionModel(init, trans, list("ABCDEFGHI"), **kwargs)
+
+
+def test_load_selects_the_period_in_si_units(tmp_path, synthetic):
+    arrays = synthetic.library_arrays(n_states=30, horizon=3.0, sample_interval=0.05)
+    path = synthetic.write_library(tmp_path / "lib.npz", arrays)
+    for period, index in [(1.5, 30), (0.75, 15), (3.0, 60)]:
+        model = TransitionModel.load(path, period=period)
+        assert model.period == period
+        np.testing.assert_array_equal(model.transitions, arrays["transitions"][:, :, index, :].astype(float))
+        np.testing.assert_array_equal(model.initial_states, arrays["initial_states"])
+    # Yaw rates are rad/s throughout: the kinematic library's primitive C turns at 0.35 rad/s.
+    model = TransitionModel.load(path, period=3.0)
+    assert np.all(np.abs(model.transitions[:, :, 5]) < 0.6)
+    assert model.primitive_names == list("ABCDEFGHI")
+    assert model.primitive_id("C") == 2
+    with pytest.raises(ValueError, match="primitive 'Z' is unknown"):
+        model.primitive_id("Z")
+    with pytest.raises(ValueError, match="not a multiple"):
+        TransitionModel.load(path, period=1.52)

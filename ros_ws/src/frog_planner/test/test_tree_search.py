@@ -1,0 +1,205 @@
+"""Vectorised tree search against a brute-force itertools reference on a tiny library; the planner API."""
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from frog_planner.core.paths import ellipse_path, line_path, sinusoid_path
+from frog_planner.core.planner import Planner
+from frog_planner.core.transition_model import TransitionModel
+from frog_planner.core.tree_search import CostWeights, search
+
+W_A, W_B, W_C = 500.0, 50.0, 300.0   # paper eq. 19 weights
+
+
+# ---- brute-force reference: explicit loops, math module, no frog_planner code ----------------------------------
+
+def ref_nearest(states, q, metric, scale, k, floor_fraction=0.05):
+    scored = []
+    for i, s in enumerate(states):
+        total = 0.0
+        for c in range(3):
+            denom = scale[c] if metric == "euclidean" else max(abs(q[c]), floor_fraction * scale[c])
+            total += ((q[c] - s[c]) / denom) ** 2
+        scored.append((math.sqrt(total), i))
+    scored.sort()
+    return [i for _, i in scored[:k]]
+
+
+def ref_transition(table, action, neighbours):
+    rows = [table[action][n] for n in neighbours]
+    out = [sum(r[c] for r in rows) / len(rows) for c in range(6)]
+    out[2] = math.atan2(sum(math.sin(r[2]) for r in rows), sum(math.cos(r[2]) for r in rows))
+    return out
+
+
+def ref_step(pose, t):
+    """Eq. 18 by hand."""
+    x, y, th = pose
+    c, s = math.cos(th), math.sin(th)
+    return (x + c * t[0] - s * t[1], y + s * t[0] + c * t[1], th + t[2]), (t[3], t[4], t[5])
+
+
+def ref_cost(path, pose, prev_progress):
+    """Eq. 19: closest point on the path between s_prev and s_prev + window, by looping over segments."""
+    pts, arc, L = path.points, path.arc_length, path.length
+    s0 = prev_progress * L
+    s1 = min(s0 + path.progress_window, L)
+    best = (math.inf, None)
+    for i in range(len(pts) - 1):
+        lo, hi = max(arc[i], s0), min(arc[i + 1], s1)
+        if lo > hi:
+            continue
+        seg = arc[i + 1] - arc[i]
+        a = pts[i] + (lo - arc[i]) / seg * (pts[i + 1] - pts[i])
+        b = pts[i] + (hi - arc[i]) / seg * (pts[i + 1] - pts[i])
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        den = dx * dx + dy * dy
+        t = 0.0 if den == 0 else min(1.0, max(0.0, ((pose[0] - a[0]) * dx + (pose[1] - a[1]) * dy) / den))
+        d = math.hypot(pose[0] - a[0] - t * dx, pose[1] - a[1] - t * dy)
+        if d < best[0]:
+            best = (d, lo + t * (hi - lo))
+    d, s = best
+    tangent = np.interp(s, arc, np.unwrap(path.tangent_headings))
+    err = abs((pose[2] - tangent + math.pi) % (2 * math.pi) - math.pi)
+    return W_A * d + W_B * err + W_C * (1.0 - s / L)
+
+
+def ref_search(states, table, path, pose, vel, depth, metric, k, scale, prev_progress):
+    best_cost, best_seq, leaves = math.inf, None, {}
+    for seq in itertools.product(range(len(table)), repeat=depth):
+        p, v = pose, vel
+        for a in seq:
+            p, v = ref_step(p, ref_transition(table, a, ref_nearest(states, v, metric, scale, k)))
+        leaves[seq] = p
+        cost = ref_cost(path, p, prev_progress)
+        if cost < best_cost:
+            best_cost, best_seq = cost, seq
+    return best_seq, best_cost, leaves
+
+
+# ---- tests ----------------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def tiny(synthetic):
+    """15 initial states x 9 primitives of the kinematic test model, T = 1.5 s."""
+    arrays = synthetic.library_arrays(n_states=15, horizon=1.5, sample_interval=0.25, seed=4)
+    return arrays["initial_states"], arrays["transitions"][:, :, -1, :].astype(float)
+
+
+@pytest.mark.parametrize("depth, metric, k", [(1, "euclidean", 1), (2, "euclidean", 1), (3, "euclidean", 1),
+                                              (2, "relative", 1), (3, "relative", 1), (2, "euclidean", 2),
+                                              (2, "relative", 3)])
+def test_search_matches_brute_force(tiny, depth, metric, k):
+    states, table = tiny
+    model = TransitionModel(states, table, list("ABCDEFGHI"), metric=metric, k=k)
+    scale = [float(np.ptp(states[:, c])) for c in range(3)]
+    path = sinusoid_path(length=0.36, A=8.5, f=10.0, start=(0.0, 0.0), heading=0.1)
+    for pose, vel, prev in [((0.02, 0.01, 0.2), (0.02, 0.005, 0.1), 0.05),
+                            ((0.10, -0.03, -0.4), (0.035, -0.02, -0.3), 0.25)]:
+        result = search(model, path, pose, vel, depth, CostWeights(), prev)
+        want_seq, want_cost, leaves = ref_search(states, table, path, pose, vel, depth, metric, k, scale, prev)
+        assert result.sequence == want_seq
+        assert result.first_action == want_seq[0]
+        assert result.total_cost == pytest.approx(want_cost, rel=1e-9)
+        for i, seq in enumerate(itertools.product(range(9), repeat=depth)):
+            np.testing.assert_allclose(result.leaf_poses[i, :2], leaves[seq][:2], atol=1e-12)
+            assert math.cos(result.leaf_poses[i, 2] - leaves[seq][2]) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_depth_one_is_the_cheapest_single_primitive(tiny):
+    states, table = tiny
+    model = TransitionModel(states, table, list("ABCDEFGHI"))
+    path = line_path(length=0.4)
+    pose, vel = (0.0, 0.02, -0.2), (0.02, 0.0, 0.0)
+    n = ref_nearest(states, vel, "euclidean", [float(np.ptp(states[:, c])) for c in range(3)], 1)
+    costs = [ref_cost(path, ref_step(pose, table[a][n[0]])[0], 0.0) for a in range(9)]
+    result = search(model, path, pose, vel, 1)
+    assert result.first_action == int(np.argmin(costs))
+    np.testing.assert_allclose(result.leaf_cost.total, costs, rtol=1e-9)
+
+
+def test_weights_change_the_choice(tiny):
+    states, table = tiny
+    model = TransitionModel(states, table, list("ABCDEFGHI"))
+    path = line_path(length=0.4)
+    pose, vel = (0.0, 0.0, 0.0), (0.02, 0.0, 0.0)
+    # Only progress counts: the fastest forward primitive (B drives to 4 cm/s).
+    assert search(model, path, pose, vel, 1, CostWeights(0.0, 0.0, 300.0)).first_action == 1
+    # Only heading counts: the primitive whose heading change from the nearest state is smallest.
+    n = ref_nearest(states, vel, "euclidean", [float(np.ptp(states[:, c])) for c in range(3)], 1)[0]
+    want = int(np.argmin([abs(table[a][n][2]) for a in range(9)]))
+    assert search(model, path, pose, vel, 1, CostWeights(0.0, 50.0, 0.0)).first_action == want
+
+
+def test_bad_depth_and_weights_are_rejected(tiny):
+    states, table = tiny
+    model = TransitionModel(states, table, list("ABCDEFGHI"))
+    with pytest.raises(ValueError, match="search depth 6 is out of range; expected 1-5"):
+        Planner(model, line_path(), depth=6)
+    with pytest.raises(ValueError, match="cost weight distance = -1"):
+        CostWeights(distance=-1.0)
+
+
+def test_planner_decision_fields(tiny):
+    states, table = tiny
+    model = TransitionModel(states, table, list("ABCDEFGHI"))
+    path = line_path(length=0.4)
+    planner = Planner(model, path, depth=2)
+    d = planner.decide([0.1, 0.01, 0.0], [0.02, 0.0, 0.0])
+    assert 0 <= d.primitive_id < 9 and d.name == "ABCDEFGHI"[d.primitive_id]
+    assert len(d.sequence) == 2 and d.sequence[0] == d.primitive_id
+    assert d.progress == pytest.approx(0.25)
+    assert d.distance_to_path == pytest.approx(0.01)
+    assert d.current_cost == pytest.approx(W_A * 0.01 + W_C * 0.75)
+    assert d.current_cost_terms.distance == pytest.approx(5.0)
+    assert d.current_cost_terms.heading == pytest.approx(0.0)
+    assert d.total_cost == pytest.approx(d.cost_terms.distance + d.cost_terms.heading + d.cost_terms.progress)
+    n = ref_nearest(states, (0.02, 0.0, 0.0), "euclidean", [float(np.ptp(states[:, c])) for c in range(3)], 1)
+    np.testing.assert_allclose(d.predicted_pose[:2], ref_step((0.1, 0.01, 0.0), table[d.primitive_id][n[0]])[0][:2])
+    assert not d.goal_reached
+    assert planner.decide([0.395, 0.0, 0.0], [0.02, 0.0, 0.0]).goal_reached
+
+
+def test_planner_progress_is_monotone_on_the_ellipse(tiny):
+    states, table = tiny
+    planner = Planner(TransitionModel(states, table, list("ABCDEFGHI")), ellipse_path(), depth=1)
+    path = planner.path
+    rng = np.random.default_rng(2)
+    history = []
+    for s in np.concatenate([np.linspace(0.0, 0.6, 30), np.linspace(0.6, 0.55, 4), np.linspace(0.55, 1.0, 25)]):
+        xy = path.point_at(s) + rng.normal(0.0, 0.004, 2)
+        d = planner.decide([xy[0], xy[1], float(path.tangent_heading_at(s))], [0.02, 0.0, 0.0])
+        history.append(d.progress)
+    assert history[0] < 0.02                      # the nearby end of the ellipse is not mistaken for the start
+    assert np.all(np.diff(history) >= 0.0)
+    assert history[-1] > 0.97 and d.goal_reached
+
+
+def test_planner_rejects_bad_measurements_and_keeps_its_state(tiny):
+    states, table = tiny
+    planner = Planner(TransitionModel(states, table, list("ABCDEFGHI")), line_path(length=0.4))
+    planner.decide([0.2, 0.0, 0.0], [0.02, 0.0, 0.0])
+    before = planner.progress
+    with pytest.raises(ValueError, match=r"pose \[0.3, nan, 0.0\] is not finite"):
+        planner.decide([0.3, float("nan"), 0.0], [0.02, 0.0, 0.0])
+    with pytest.raises(ValueError, match="body velocity has 2 values; expected 3"):
+        planner.decide([0.3, 0.0, 0.0], [0.02, 0.0])
+    assert planner.progress == before
+    planner.reset()
+    assert planner.progress == 0.0
+
+
+def test_world_state_entry_applies_step5(tiny):
+    states, table = tiny
+    model = TransitionModel(states, table, list("ABCDEFGHI"))
+    a = Planner(model, line_path(), depth=2)
+    b = Planner(model, line_path(), depth=2)
+    th = 0.4
+    # Body velocity (0.02 forward, 0.005 left) seen in the world frame at heading th, by hand.
+    world = (0.02 * math.cos(th) - 0.005 * math.sin(th), 0.02 * math.sin(th) + 0.005 * math.cos(th))
+    da = a.decide_from_world_state([0.05, 0.01, th, world[0], world[1], 0.1])
+    db = b.decide([0.05, 0.01, th], [0.02, 0.005, 0.1])
+    assert da.sequence == db.sequence and da.total_cost == pytest.approx(db.total_cost)
