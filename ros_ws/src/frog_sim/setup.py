@@ -20,6 +20,7 @@ setup(
         'console_scripts': [
             'sim_node = frog_sim.nodes.sim_node:main',
             'frog-library = frog_sim.library_cli:main',
+            'frog-sweep = frog_sim.sweep_cli:main',
             'frog-sim = frog_sim.cli:main',
         ],
     },

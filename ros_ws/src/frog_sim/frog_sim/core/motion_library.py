@@ -182,7 +182,7 @@ def _library_task(spec_json: dict, start: int, stop: int) -> dict:
     return {"transitions": trans, "converged": conv}
 
 
-def _code_version() -> str:
+def code_version() -> str:
     try:
         from importlib.metadata import version
         v = version("frog_sim")
@@ -239,7 +239,7 @@ def generate_library(spec: LibrarySpec, out_path, work_dir=None, workers: Option
         "actuation": {"pulse_duration_s": robot.get("pulse_duration"),
                       "profile": _simulator(spec_json).metadata().get("profile")},
         "time_step_s": spec_json["time_step_s"],
-        "code_version": _code_version(),
+        "code_version": code_version(),
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "generation_wall_time_s": elapsed,
     }
