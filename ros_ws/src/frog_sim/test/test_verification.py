@@ -106,7 +106,7 @@ def _free_frog_integrator(h_seed=0):
     integ = ImplicitEulerIntegrator(model.network, model.mass, fluid_density=0.0,
                                     force_tolerance=1e-12)
     rng = np.random.default_rng(h_seed)
-    integ.v[:] = 0.02 * rng.standard_normal(integ.v.size)
+    integ.set_state(v=0.02 * rng.standard_normal(integ.v.size))
     # bend the limbs away from rest so that elastic forces act
     integ.kappa0[:] *= 1.0 + 0.2 * rng.standard_normal(integ.kappa0.size) * (model.network.bend_group > 0)
     return model, integ
@@ -135,6 +135,7 @@ def test_momentum_without_drag():
         predicted += h * np.sum(m * (v_new[:, 0] * v_old[:, 1] - v_new[:, 1] * v_old[:, 0]))
     p1 = (m[:, None] * integ.v.reshape(-1, 2)).sum(axis=0)
     l1 = ang(integ.x, integ.v)
+    assert integ.stats.halvings == 0          # the balance below is per full step
     assert np.linalg.norm(p1 - p0) < 1e-10 * scale_p
     scale_l = np.sum(m * np.linalg.norm(integ.x.reshape(-1, 2), axis=1)
                      * np.linalg.norm(integ.v.reshape(-1, 2), axis=1))
@@ -186,3 +187,25 @@ def test_terminal_velocity_quadratic_drag(direction):
     expected = np.sqrt(2 * total / (rho * coef * diameter * length))
     v = integ.v.reshape(-1, 2)[:, axis]
     assert np.abs(v / expected - 1).max() < 0.01
+
+
+def test_numpy_reference_step_matches_numba_step():
+    """The benchmark's numpy/scipy baseline computes the same backward-Euler steps."""
+    from frog_sim.core.actuation import ActuationLibrary
+    from frog_sim.core.reference_numpy import NumpyReferenceStepper
+    from frog_sim.core.simulation import FrogSimulation
+    sim = FrogSimulation(library=ActuationLibrary.load())
+    sim.set_gait(1.0, 0.5)
+    sim.set_velocity(0.02, 0.005, 0.1)
+    integ = sim.integrator
+    ref = NumpyReferenceStepper(integ.network, integ.mass, actuator=integ.actuator,
+                                force_tolerance=integ.force_tolerance)
+    ref.x[:] = integ.x
+    ref.v[:] = integ.v
+    h = sim.time_step
+    for _ in range(20):                      # through the start of the power stroke
+        sim.step(1)
+        ref.step(h)
+    scale = np.abs(integ.v).max()
+    assert np.abs(ref.v - integ.v).max() < 1e-6 * scale
+    assert np.abs(ref.x - integ.x).max() < 1e-9

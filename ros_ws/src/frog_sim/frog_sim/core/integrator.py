@@ -209,8 +209,11 @@ def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
                f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, force_tol, pos_tol,
                max_iter, act_profile, act_young, act_times, act_offsets, act_bend, act_bend_limb,
                act_bend_sign, act_bend_i, act_edge, act_edge_limb, act_edge_area,
-               lu, rhs, resid, x_prev, v_prev, lu_state, reuse):
+               lu, rhs, resid, x_prev, v_prev, lu_state, reuse, v_old):
     """Advance ``n_steps`` steps of size ``h`` in place (x, v), actuation included.
+
+    The Newton guess extrapolates the velocity linearly, ``x_k + h (2 v_k - v_{k-1})``
+    (``v_old`` holds v_{k-1} and is updated), which saves about one iteration per step.
 
     Returns (steps done, status of the failing step or 0, total Newton iterations,
     last residual norm). On failure x, v hold the state before the failing step.
@@ -227,7 +230,7 @@ def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
             x_prev[d] = x[d]
             v_prev[d] = v[d]
             if not fixed[d]:
-                x[d] = x[d] + h * v[d]
+                x[d] = x[d] + h * (2.0 * v[d] - v_old[d])
         status, iters, norm = newton_direct(
             x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0, cn, ct,
             f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, True, force_tol, pos_tol,
@@ -240,6 +243,7 @@ def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
             return k, status, total_iter, norm
         for d in range(n):
             v[d] = (x[d] - x_prev[d]) / h if not fixed[d] else 0.0
+            v_old[d] = v_prev[d]
     return n_steps, 0, total_iter, norm
 
 
@@ -344,6 +348,7 @@ class ImplicitEulerIntegrator:
         self.external_force = np.zeros(n)
         self.x = network.positions.reshape(-1).astype(float).copy()
         self.v = np.zeros(n)
+        self._v_old = np.zeros(n)      # velocity of the previous step (predictor)
         self.time = 0.0
         self.stats = StepStatistics()
         self.update_actuation(self.time)
@@ -360,6 +365,21 @@ class ImplicitEulerIntegrator:
         em[fe[:, :, None] | fe[:, None, :]] = trash
         bm[fb[:, :, None] | fb[:, None, :]] = trash
         return em, bm, diag_map.copy()
+
+    def set_state(self, x=None, v=None) -> None:
+        """Overwrite positions (2N,) [m] and/or velocities (2N,) [m/s]; resets the predictor."""
+        if x is not None:
+            x = np.asarray(x, dtype=float).ravel()
+            if x.shape != self.x.shape or not np.all(np.isfinite(x)):
+                raise ValueError(f'x must be {self.x.size} finite values')
+            self.x[:] = x
+        if v is not None:
+            v = np.asarray(v, dtype=float).ravel()
+            if v.shape != self.v.shape or not np.all(np.isfinite(v)):
+                raise ValueError(f'v must be {self.v.size} finite values')
+            self.v[:] = v
+        self._v_old[:] = self.v
+        self._lu_state[0] = 0
 
     @property
     def factorizations(self) -> int:
@@ -425,11 +445,12 @@ class ImplicitEulerIntegrator:
         self.update_actuation(t_new)
         x_prev = self.x.copy()
         v_prev = self.v.copy()
-        x = x_prev + np.where(self.fixed, 0.0, h * v_prev)
+        x = x_prev + np.where(self.fixed, 0.0, h * (2.0 * v_prev - self._v_old))
         status, iters, norm = self._newton(x, x_prev, v_prev, h, True, solver)
         if status == STATUS_OK:
             self.x = x
             self.v = np.where(self.fixed, 0.0, (x - x_prev) / h)
+            self._v_old = v_prev
             self.time = t_new
         return status, iters, norm
 
@@ -439,6 +460,17 @@ class ImplicitEulerIntegrator:
         self.stats.last_residual = norm
         if status == STATUS_OK:
             return
+        if self.reuse_jacobian:
+            # simplified Newton failed: retry the same step with full Newton first
+            self.reuse_jacobian = False
+            try:
+                status, iters, norm = self._single_step(h, self.solver)
+            finally:
+                self.reuse_jacobian = True
+            self.stats.newton_iterations += iters
+            self.stats.last_residual = norm
+            if status == STATUS_OK:
+                return
         if depth >= self.max_halvings:
             raise ConvergenceError(
                 f'time step failed at t = {self.time:.6g} s with h = {h:.3g} s after '
@@ -497,7 +529,8 @@ class ImplicitEulerIntegrator:
                 self.ct, self.external_force, self.fixed, *self._maps_lu, pat.lu_plan.perm,
                 self._plan, self.force_tolerance,
                 self.position_tolerance, self.max_iterations, *act, self._lu, self._rhs,
-                self._resid, self._x_prev, self._v_prev, self._lu_state, self.reuse_jacobian)
+                self._resid, self._x_prev, self._v_prev, self._lu_state, self.reuse_jacobian,
+                self._v_old)
             self.stats.newton_iterations += iters
             self.stats.last_residual = norm
             self.stats.steps += done

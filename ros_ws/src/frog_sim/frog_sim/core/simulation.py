@@ -312,7 +312,7 @@ class FrogSimulation:
             c, s = np.cos(h), np.sin(h)
             v = np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
         vel = nodal_velocities(self.node_positions, self.model.mass, v, yaw_rate)
-        self.integrator.v[:] = vel.ravel()
+        self.integrator.set_state(v=vel)
 
     def set_pose(self, x: float, y: float, heading: float) -> None:
         """Place the current shape rigidly with its COM at (x, y) [m] and heading [rad]."""
@@ -322,8 +322,7 @@ class FrogSimulation:
         rot = np.array([[c, -s], [s, c]])
         new = (pos - st.com) @ rot.T + np.array([x, y])
         vel = self.node_velocities @ rot.T
-        self.integrator.x[:] = new.ravel()
-        self.integrator.v[:] = vel.ravel()
+        self.integrator.set_state(x=new, v=vel)
         self._unwrap.reset(heading)
 
     # ------------------------------------------------------------------ stepping
