@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 from .library_file import load_motion_library
 
 METRICS = ("euclidean", "relative")
-_RELATIVE_CHUNK = 64  # queries per block in the brute-force relative metric (bounds memory)
+_RELATIVE_CHUNK = 128  # queries per block in the brute-force relative metric (bounds memory)
 
 
 def world_to_body_velocity(heading, world_velocity):
@@ -123,6 +123,7 @@ class TransitionModel:
         self.relative_floor = float(relative_floor)
         self.source = str(source)
         self._tree = cKDTree(self.initial_states / scale) if metric == "euclidean" else None
+        self._states_by_component = [np.ascontiguousarray(self.initial_states[:, c]) for c in range(3)]
         # Primitive-major -> state-major copy so one gather returns all P transitions of a state.
         self._by_state = np.ascontiguousarray(np.transpose(self.transitions, (1, 0, 2)))  # (N, P, 6)
 
@@ -191,18 +192,24 @@ class TransitionModel:
         idx = np.empty((len(q), self.k), dtype=np.intp)
         dist = np.empty((len(q), self.k))
         floor = self.relative_floor * self.scale
+        rows = np.arange(min(len(q), _RELATIVE_CHUNK))[:, None]
         for lo in range(0, len(q), _RELATIVE_CHUNK):
             block = q[lo:lo + _RELATIVE_CHUNK]
-            denom = np.maximum(np.abs(block), floor)                         # guarded v_i
-            d = np.sqrt(np.sum(((block[:, None, :] - self.initial_states[None]) / denom[:, None, :]) ** 2, axis=-1))
+            weight = 1.0 / np.maximum(np.abs(block), floor) ** 2            # 1 / guarded v_i^2
+            # d_k^2 = sum_c ((v_c - v_kc) / v_c)^2 (step 6), one component at a time, in place.
+            d2 = np.zeros((len(block), self.n_states))
+            for c in range(3):
+                diff = np.subtract(block[:, c, None], self._states_by_component[c][None, :])
+                np.multiply(diff, diff, out=diff)
+                np.multiply(diff, weight[:, c, None], out=diff)
+                d2 += diff
             if self.k == 1:
-                part = np.argmin(d, axis=1)[:, None]
+                part = np.argmin(d2, axis=1)[:, None]
             else:
-                part = np.argpartition(d, self.k - 1, axis=1)[:, :self.k]
-                order = np.argsort(np.take_along_axis(d, part, axis=1), axis=1)
-                part = np.take_along_axis(part, order, axis=1)
+                part = np.argpartition(d2, self.k - 1, axis=1)[:, :self.k]
+                part = np.take_along_axis(part, np.argsort(d2[rows[:len(block)], part], axis=1), axis=1)
             idx[lo:lo + len(block)] = part
-            dist[lo:lo + len(block)] = np.take_along_axis(d, part, axis=1)
+            dist[lo:lo + len(block)] = np.sqrt(d2[rows[:len(block)], part])
         return idx, dist
 
     def lookup(self, body_velocities):
