@@ -19,9 +19,10 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, fastmath=False)
-def stretch_element(xa0, xa1, xb0, xb1, rest_length, ea, grad, hess):
-    """Energy of one edge; writes gradient (4,) and Hessian (4, 4) w.r.t. (xa, ya, xb, yb)."""
+@njit(cache=True, fastmath=True)
+def stretch_element(xa0, xa1, xb0, xb1, rest_length, ea, grad, hess, want_hess=True):
+    """Energy of one edge; writes gradient (4,) and (if ``want_hess``) Hessian (4, 4)
+    w.r.t. (xa, ya, xb, yb). (fastmath: no NaN checks in here; callers check results.)"""
     e0 = xb0 - xa0
     e1 = xb1 - xa1
     length = np.sqrt(e0 * e0 + e1 * e1)
@@ -36,6 +37,8 @@ def stretch_element(xa0, xa1, xb0, xb1, rest_length, ea, grad, hess):
     grad[1] = -g1
     grad[2] = g0
     grad[3] = g1
+    if not want_hess:
+        return energy
     # d2E/de2 = EA/l0 t t^T + EA eps / l (I - t t^T)
     a = ea / rest_length
     b = ea * eps / length
@@ -62,7 +65,7 @@ def _d2c(p, q):
     return 0.0
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=True)
 def bend_element(xa0, xa1, xb0, xb1, xc0, xc1, dl, ei, kappa0, grad, hess, work, want_hess=True):
     """Energy of one bending triple; writes gradient (6,) and (if ``want_hess``) Hessian (6, 6).
 

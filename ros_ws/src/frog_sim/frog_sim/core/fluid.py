@@ -67,7 +67,7 @@ def lumped_masses(network, fluid_density: float, added_mass_coefficient: float) 
     return mass
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def drag_element(xa0, xa1, xb0, xb1, va0, va1, vb0, vb1, cn, ct, force, dfdv, dfdx,
                  want_jacobian=True):
     """Drag on one edge, lumped to its nodes.

@@ -86,7 +86,8 @@ def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_le
         dof4[1] = 2 * a + 1
         dof4[2] = 2 * b
         dof4[3] = 2 * b + 1
-        stretch_element(x[dof4[0]], x[dof4[1]], x[dof4[2]], x[dof4[3]], rest[m], ea[m], g4, h4)
+        stretch_element(x[dof4[0]], x[dof4[1]], x[dof4[2]], x[dof4[3]], rest[m], ea[m], g4, h4,
+                        want_jac)
         if dynamic:
             va0 = (x[dof4[0]] - x_prev[dof4[0]]) * inv_h
             va1 = (x[dof4[1]] - x_prev[dof4[1]]) * inv_h
@@ -139,7 +140,7 @@ def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len,
     """Newton iterations (eq. 7) with the numba sparse LU; ``x`` holds the guess and result.
 
     ``plan`` = (diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx, op_ptr,
-    op_target, op_lower, op_upper) of a :class:`~frog_sim.core.linear_algebra.SparseLUPlan`.
+    op_target) of a :class:`~frog_sim.core.linear_algebra.SparseLUPlan`.
     With ``reuse`` the LU factors kept in ``lu`` (valid when ``lu_state[0] == 1``) are
     reused across iterations and steps (simplified Newton); the Jacobian is
     re-assembled and re-factorised as soon as the residual contracts by less than a
@@ -148,7 +149,7 @@ def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len,
     factorisations. Returns (status, iterations, residual norm).
     """
     n = x.shape[0]
-    diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx, op_ptr, op_t, op_l, op_u = plan
+    diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx, op_ptr, op_t = plan
     norm = np.inf
     prev = np.inf
     x_last = x.copy()      # iterate before the last update (to undo a bad simplified step)
@@ -177,7 +178,7 @@ def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len,
             assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei,
                             kappa0, cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, dynamic,
                             lu, resid, True)
-            st = sparse_lu_factor(lu, diag, low_ptr, low_idx, op_ptr, op_t, op_l, op_u, 1e-13)
+            st = sparse_lu_factor(lu, diag, low_ptr, low_idx, up_ptr, up_idx, op_ptr, op_t, 1e-13)
             lu_state[1] += 1
             if st != 0:
                 lu_state[0] = 0
@@ -333,8 +334,7 @@ class ImplicitEulerIntegrator:
         self._maps_csr = self._masked_maps(self.pattern.edge_map_csr, self.pattern.bend_map_csr,
                                            self.pattern.diag_map_csr, self.pattern.nnz)
         self._plan = (plan.diag, plan.low_ptr, plan.low_row, plan.low_idx, plan.up_ptr,
-                      plan.up_col, plan.up_idx, plan.op_ptr, plan.op_target, plan.op_lower,
-                      plan.op_upper)
+                      plan.up_col, plan.up_idx, plan.op_ptr, plan.op_target)
         self.reuse_jacobian = bool(reuse_jacobian)
         self._lu_state = np.zeros(2, dtype=np.int64)   # [factors valid, factorisations]
         self._lu_h = None
@@ -358,13 +358,13 @@ class ImplicitEulerIntegrator:
         net = self.network
         edof = np.repeat(2 * net.edges, 2, axis=1) + np.tile([0, 1], 2)
         bdof = np.repeat(2 * net.bends, 2, axis=1) + np.tile([0, 1], 3)
-        em = edge_map.copy()
-        bm = bend_map.copy()
+        em = edge_map.astype(np.int32)
+        bm = bend_map.astype(np.int32)
         fe = self.fixed[edof]
         fb = self.fixed[bdof]
         em[fe[:, :, None] | fe[:, None, :]] = trash
         bm[fb[:, :, None] | fb[:, None, :]] = trash
-        return em, bm, diag_map.copy()
+        return em, bm, diag_map.astype(np.int32)
 
     def set_state(self, x=None, v=None) -> None:
         """Overwrite positions (2N,) [m] and/or velocities (2N,) [m/s]; resets the predictor."""
