@@ -167,3 +167,31 @@ def test_missing_waypoint_file(tmp_path):
 def test_bad_curve_parameters_are_rejected(factory, kwargs):
     with pytest.raises(ValueError, match="must"):
         factory(**kwargs)
+
+
+def test_path_from_spec_builds_each_kind(tmp_path):
+    from frog_planner.core.paths import path_from_spec
+    np.testing.assert_allclose(path_from_spec("line", length=0.2).points[-1], [0.2, 0.0], atol=1e-12)
+    sine = path_from_spec("sine", start=(1.0, 0.0), heading=math.pi, length=0.3, A=10.0, f=5.0)
+    np.testing.assert_allclose(sine.points[-1], [1.0 - 0.3, -0.03 * math.sin(5.0)], atol=1e-9)
+    ellipse = path_from_spec("ellipse", length=0.2, A=2.0, s_f=1.0)
+    assert np.max(np.abs(ellipse.points[:, 1])) == pytest.approx(0.05, rel=1e-3)
+    csv_file = tmp_path / "wp.csv"
+    csv_file.write_text("x,y\n0,0\n0,0.5\n")
+    assert path_from_spec("waypoints", waypoint_file=csv_file).length == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="path type 'spiral' is unknown"):
+        path_from_spec("spiral")
+    with pytest.raises(ValueError, match=r"path type 'line' takes no parameter\(s\) \['A'\]"):
+        path_from_spec("line", A=3.0)
+    with pytest.raises(ValueError, match="needs a waypoint_file"):
+        path_from_spec("waypoints")
+
+
+def test_projection_in_blocks_equals_one_block():
+    path = ellipse_path()
+    rng = np.random.default_rng(0)
+    pts = path.point_at(rng.uniform(0.0, 0.3, 9000)) + rng.normal(0.0, 0.01, (9000, 2))
+    whole = path.project(pts, 0.05)
+    first = path.project(pts[:100], 0.05)
+    np.testing.assert_array_equal(whole.distance[:100], first.distance)
+    np.testing.assert_array_equal(whole.progress[-5:], path.project(pts[-5:], 0.05).progress)

@@ -91,7 +91,7 @@ def tiny(synthetic):
 
 @pytest.mark.parametrize("depth, metric, k", [(1, "euclidean", 1), (2, "euclidean", 1), (3, "euclidean", 1),
                                               (2, "relative", 1), (3, "relative", 1), (2, "euclidean", 2),
-                                              (2, "relative", 3)])
+                                              (2, "relative", 3), (4, "euclidean", 1)])
 def test_search_matches_brute_force(tiny, depth, metric, k):
     states, table = tiny
     model = TransitionModel(states, table, list("ABCDEFGHI"), metric=metric, k=k)
@@ -104,9 +104,9 @@ def test_search_matches_brute_force(tiny, depth, metric, k):
         assert result.sequence == want_seq
         assert result.first_action == want_seq[0]
         assert result.total_cost == pytest.approx(want_cost, rel=1e-9)
-        for i, seq in enumerate(itertools.product(range(9), repeat=depth)):
-            np.testing.assert_allclose(result.leaf_poses[i, :2], leaves[seq][:2], atol=1e-12)
-            assert math.cos(result.leaf_poses[i, 2] - leaves[seq][2]) == pytest.approx(1.0, abs=1e-12)
+        want = np.array([leaves[seq] for seq in itertools.product(range(9), repeat=depth)])  # leaf i = digits of i
+        np.testing.assert_allclose(result.leaf_poses[:, :2], want[:, :2], atol=1e-12)
+        np.testing.assert_allclose(np.cos(result.leaf_poses[:, 2] - want[:, 2]), 1.0, atol=1e-12)
 
 
 def test_depth_one_is_the_cheapest_single_primitive(tiny):

@@ -6,7 +6,8 @@ Modules: ``library_file`` (read/validate the motion library), ``transition_model
 """
 
 from .library_file import LibraryFormatError, MotionLibrary, load_motion_library
-from .paths import Path, ellipse_path, line_path, parametric_path, sinusoid_path, waypoint_path_from_csv
+from .paths import (Path, ellipse_path, line_path, parametric_path, path_from_spec, sinusoid_path,
+                    waypoint_path_from_csv)
 from .planner import CostTerms, Decision, Planner
 from .prediction import apply_transition, predict_world_state
 from .transition_model import TransitionModel, body_to_world_velocity, world_to_body_velocity
@@ -14,7 +15,8 @@ from .tree_search import CostWeights, PathCost, SearchResult, path_cost, search
 
 __all__ = [
     "LibraryFormatError", "MotionLibrary", "load_motion_library",
-    "Path", "ellipse_path", "line_path", "parametric_path", "sinusoid_path", "waypoint_path_from_csv",
+    "Path", "ellipse_path", "line_path", "parametric_path", "path_from_spec", "sinusoid_path",
+    "waypoint_path_from_csv",
     "CostTerms", "Decision", "Planner",
     "apply_transition", "predict_world_state",
     "TransitionModel", "body_to_world_velocity", "world_to_body_velocity",

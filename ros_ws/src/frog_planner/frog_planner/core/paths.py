@@ -32,6 +32,7 @@ ELLIPSE_A = 1.0
 ELLIPSE_S_F = 1.0 / 0.95
 
 _DENSE_SAMPLES = 4001  # samples of a parametric curve before arc-length resampling
+_PROJECT_CHUNK = 4096  # positions per block when projecting (bounds memory at depth 4-5)
 
 
 def wrap_angle(angle):
@@ -226,6 +227,14 @@ class Path:
         """
         pos = np.atleast_2d(np.asarray(positions, dtype=float))[:, :2]
         verts, arc = self.window(previous_progress)
+        if len(pos) > _PROJECT_CHUNK:
+            parts = [self._project_window(pos[i:i + _PROJECT_CHUNK], verts, arc)
+                     for i in range(0, len(pos), _PROJECT_CHUNK)]
+            return PathProjection(*(np.concatenate([getattr(p, f) for p in parts])
+                                    for f in ("progress", "distance", "tangent_heading", "closest_point")))
+        return self._project_window(pos, verts, arc)
+
+    def _project_window(self, pos, verts, arc):
         a = verts[:-1]                      # (W, 2)
         d = verts[1:] - a                   # (W, 2)
         seg_len2 = np.einsum("ij,ij->i", d, d)
@@ -417,3 +426,54 @@ def waypoint_path_from_csv(file_path, **kwargs):
         return Path(np.array(rows), **kwargs)
     except ValueError as exc:
         raise ValueError(f"{file_path}: {exc}") from None
+
+
+PATH_KINDS = ("line", "sinusoid", "ellipse", "waypoints")
+
+
+def path_from_spec(kind, start=(0.0, 0.0), heading=0.0, waypoint_file=None, **params):
+    """Build a path by name, for nodes and evaluators that take the path type as a setting.
+
+    Parameters
+    ----------
+    kind : {"line", "sinusoid", "ellipse", "waypoints"}
+        "sine" is accepted for "sinusoid".
+    start : array_like, shape (2,)
+        World position in m where the curve starts (ignored for waypoints, which are in the world frame).
+    heading : float
+        World heading in rad of the curve's local x axis (ignored for waypoints).
+    waypoint_file : str or os.PathLike, optional
+        CSV file for kind "waypoints".
+    **params
+        Curve parameters (``length``, ``A``, ``f``, ``s_f``) and :class:`Path` settings
+        (``n_points``, ``progress_window``, ``goal_tolerance``, ``goal_min_progress``).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        For an unknown kind, a parameter the kind does not take, or a missing waypoint file name.
+
+    Examples
+    --------
+    >>> path_from_spec("ellipse", start=(0.1, 0.2), heading=0.5, length=0.3).name
+    'ellipse'
+    """
+    name = {"sine": "sinusoid"}.get(str(kind).lower(), str(kind).lower())
+    curve_params = {"line": {"length"}, "sinusoid": {"length", "A", "f"}, "ellipse": {"length", "A", "s_f"},
+                    "waypoints": set()}
+    if name not in curve_params:
+        raise ValueError(f"path type {kind!r} is unknown; expected one of {list(PATH_KINDS)}")
+    allowed = curve_params[name] | {"n_points", "progress_window", "goal_tolerance", "goal_min_progress", "name"}
+    extra = sorted(set(params) - allowed)
+    if extra:
+        raise ValueError(f"path type {name!r} takes no parameter(s) {extra}; expected some of {sorted(allowed)}")
+    if name == "waypoints":
+        if not waypoint_file:
+            raise ValueError("path type 'waypoints' needs a waypoint_file (CSV with columns x,y in m)")
+        return waypoint_path_from_csv(waypoint_file, **params)
+    factory = {"line": line_path, "sinusoid": sinusoid_path, "ellipse": ellipse_path}[name]
+    return factory(start=start, heading=heading, **params)
