@@ -136,15 +136,15 @@ def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_le
 @njit(cache=True)
 def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0,
                   cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, dynamic,
-                  force_tol, pos_tol, max_iter, lu, rhs, resid, lu_state, reuse):
+                  force_tol, pos_tol, max_iter, lu, rhs, resid, lu_state, reuse, refresh_ratio=0.5):
     """Newton iterations (eq. 7) with the numba sparse LU; ``x`` holds the guess and result.
 
     ``plan`` = (diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx, op_ptr,
     op_target) of a :class:`~frog_sim.core.linear_algebra.SparseLUPlan`.
     With ``reuse`` the LU factors kept in ``lu`` (valid when ``lu_state[0] == 1``) are
     reused across iterations and steps (simplified Newton); the Jacobian is
-    re-assembled and re-factorised as soon as the residual contracts by less than a
-    factor 4 per iteration. Convergence: ``max|F| <= force_tol``, or a full Newton
+    re-assembled and re-factorised as soon as the residual contracts by less than
+    ``1 / refresh_ratio`` per iteration. Convergence: ``max|F| <= force_tol``, or a full Newton
     update (fresh Jacobian) with ``max|dx| <= pos_tol``. ``lu_state[1]`` counts
     factorisations. Returns (status, iterations, residual norm).
     """
@@ -163,7 +163,7 @@ def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len,
                                dynamic, lu, resid, False)
         if norm <= force_tol:
             return STATUS_OK, it, norm
-        if not fresh and not (norm <= 0.25 * prev):
+        if not fresh and not (norm <= refresh_ratio * prev):
             fresh = True
             if not last_fresh:
                 # a simplified step (old factors) contracted too little or diverged: go back
@@ -210,7 +210,7 @@ def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
                f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, force_tol, pos_tol,
                max_iter, act_profile, act_young, act_times, act_offsets, act_bend, act_bend_limb,
                act_bend_sign, act_bend_i, act_edge, act_edge_limb, act_edge_area,
-               lu, rhs, resid, x_prev, v_prev, lu_state, reuse, v_old):
+               lu, rhs, resid, x_prev, v_prev, lu_state, reuse, v_old, refresh_ratio=0.5):
     """Advance ``n_steps`` steps of size ``h`` in place (x, v), actuation included.
 
     The Newton guess extrapolates the velocity linearly, ``x_k + h (2 v_k - v_{k-1})``
@@ -235,7 +235,7 @@ def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
         status, iters, norm = newton_direct(
             x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0, cn, ct,
             f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, True, force_tol, pos_tol,
-            max_iter, lu, rhs, resid, lu_state, reuse)
+            max_iter, lu, rhs, resid, lu_state, reuse, refresh_ratio)
         total_iter += iters
         if status != 0:
             for d in range(n):
@@ -336,6 +336,7 @@ class ImplicitEulerIntegrator:
         self._plan = (plan.diag, plan.low_ptr, plan.low_row, plan.low_idx, plan.up_ptr,
                       plan.up_col, plan.up_idx, plan.op_ptr, plan.op_target)
         self.reuse_jacobian = bool(reuse_jacobian)
+        self.refresh_ratio = 0.5    # refresh the Jacobian when |F| contracts less than 2x
         self._lu_state = np.zeros(2, dtype=np.int64)   # [factors valid, factorisations]
         self._lu_h = None
         self._rhs = np.zeros(n)
@@ -433,7 +434,7 @@ class ImplicitEulerIntegrator:
                 self.external_force, self.fixed, *self._maps_lu, pat.lu_plan.perm, self._plan,
                 dynamic, self.force_tolerance,
                 self.position_tolerance, self.max_iterations, self._lu, self._rhs, self._resid,
-                self._lu_state, reuse)
+                self._lu_state, reuse, self.refresh_ratio)
             if status != STATUS_BAD_PIVOT:
                 return status, iters, norm
             self.stats.sparse_fallbacks += 1
@@ -530,7 +531,7 @@ class ImplicitEulerIntegrator:
                 self._plan, self.force_tolerance,
                 self.position_tolerance, self.max_iterations, *act, self._lu, self._rhs,
                 self._resid, self._x_prev, self._v_prev, self._lu_state, self.reuse_jacobian,
-                self._v_old)
+                self._v_old, self.refresh_ratio)
             self.stats.newton_iterations += iters
             self.stats.last_residual = norm
             self.stats.steps += done
