@@ -18,6 +18,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'planner_node = frog_planner.nodes.planner_node:main',
         ],
     },
 )

@@ -1,0 +1,121 @@
+"""planner_node as a real process: decisions, latched path, idle reasons, bad input."""
+
+import importlib.util
+import math
+import time
+from pathlib import Path
+
+import pytest
+from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_srvs.srv import Trigger
+
+pytestmark = pytest.mark.system
+
+QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+SYNTH = (Path(__file__).resolve().parents[1] / "ros_ws" / "src" / "frog_planner" / "test"
+         / "synthetic_library.py")
+
+
+@pytest.fixture
+def library(tmp_path):
+    """A small kinematic library in the contract's file format (planner tests' helper)."""
+    spec = importlib.util.spec_from_file_location("planner_synthetic_library_sys", SYNTH)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    path = tmp_path / "synthetic.npz"
+    mod.write_library(path, n_states=60, horizon=1.5)
+    return path
+
+
+def _odom(x, y, yaw, v=0.01):
+    m = Odometry()
+    m.header.frame_id, m.child_frame_id = "tank", "frog"
+    m.pose.pose.position.x, m.pose.pose.position.y = x, y
+    m.pose.pose.orientation.z, m.pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+    m.twist.twist.linear.x = v
+    return m
+
+
+def test_decides_every_period_and_reports_idle_reasons(launch, probe, library):
+    from soft_robot_interfaces.msg import PlannerStatus, Primitive
+    node = launch("planner_node", params={"library_file": str(library), "period": 0.5,
+                                          "path_type": "line", "odom_topic": "/test/odom"})
+    prims, status, paths = [], [], []
+    probe.node.create_subscription(Primitive, "/frog/primitive", prims.append, QOS)
+    probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
+    odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
+    node.wait_for_log("following a line path", timeout=60)
+    probe.wait_for_subscriber("/test/odom", timeout=20)
+
+    # no odometry yet: primitive I, and the reason is logged once
+    probe.spin_until(lambda: len(prims) >= 2, 10, "idle primitives")
+    assert all(p.id == Primitive.ID_I and p.name == "I" for p in prims)
+    node.wait_for_log(r"publishing primitive I: no odometry on /test/odom", timeout=5)
+
+    # the latched path reaches a late subscriber
+    probe.node.create_subscription(PathMsg, "/frog/path", paths.append, LATCHED)
+    probe.spin_until(lambda: paths, 10, "latched /frog/path")
+    assert len(paths[0].poses) == 100 and paths[0].header.frame_id == "tank"
+
+    # odometry 3 cm left of the line, heading along it: a real decision with status
+    prims.clear()
+    status.clear()
+    end = time.monotonic() + 3.0
+    while time.monotonic() < end:
+        odom_pub.publish(_odom(0.05, 0.03, 0.0))
+        probe.spin_for(0.1)
+    decided = [s for s in status if s.total_cost > 0]
+    assert decided, "no decision with a cost was published"
+    s = decided[-1]
+    assert s.distance_to_path == pytest.approx(0.03, abs=1e-3)
+    assert 0.0 < s.path_progress < 0.3
+    assert s.primitive_name == "ABCDEFGHI"[s.primitive_id]
+    assert prims[-1].id == s.primitive_id
+
+    # non-finite odometry is rejected, the node keeps running
+    odom_pub.publish(_odom(float("nan"), 0.0, 0.0))
+    node.wait_for_log("ignored odometry with non-finite values", timeout=5)
+    assert node.running()
+
+    # stale odometry (none for > 2 periods): back to I with the reason
+    prims.clear()
+    probe.spin_for(2.0)
+    node.wait_for_log(r"publishing primitive I: odometry is stale", timeout=5)
+    assert prims[-1].id == Primitive.ID_I
+
+    # ~/stop and ~/start
+    stop = probe.node.create_client(Trigger, "/planner_node/stop")
+    start = probe.node.create_client(Trigger, "/planner_node/start")
+    probe.wait_for_service(stop)
+    assert probe.call(stop, Trigger.Request()).success
+    node.wait_for_log("stopped by ~/stop", timeout=5)
+    assert probe.call(start, Trigger.Request()).success
+    node.wait_for_log("started", timeout=5)
+    assert node.stop() == 0 and node.stopped_cleanly
+
+
+def test_missing_or_corrupt_library_keeps_node_up_publishing_I(launch, probe, tmp_path):
+    from soft_robot_interfaces.msg import Primitive
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"this is not a library")
+    node = launch("planner_node", params={"library_file": str(bad), "period": 0.3})
+    prims = []
+    probe.node.create_subscription(Primitive, "/frog/primitive", prims.append, QOS)
+    node.wait_for_log(r"cannot use library .*bad\.npz", timeout=60)
+    probe.spin_until(lambda: len(prims) >= 2, 10, "primitives")
+    assert {p.id for p in prims} == {Primitive.ID_I}
+    assert node.running()
+    assert node.stop() == 0
+
+
+@pytest.mark.parametrize("params,message", [
+    ({"depth": 9}, "depth"), ({"path_type": "spiral"}, "path_type"),
+    ({"period": -1.0}, "period"), ({"path_type": "waypoints"}, "waypoint_file")])
+def test_bad_parameters_exit_with_a_message(launch, params, message):
+    node = launch("planner_node", params=params)
+    assert node.wait(60) == 2
+    assert "fatal configuration error" in node.log_text() and message in node.log_text()
