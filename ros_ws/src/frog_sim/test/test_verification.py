@@ -194,7 +194,7 @@ def test_numpy_reference_step_matches_numba_step():
     from frog_sim.core.actuation import ActuationLibrary
     from frog_sim.core.reference_numpy import NumpyReferenceStepper
     from frog_sim.core.simulation import FrogSimulation
-    sim = FrogSimulation(library=ActuationLibrary.load())
+    sim = FrogSimulation(library=ActuationLibrary.load(), force_tolerance=1e-10)
     sim.set_gait(1.0, 0.5)
     sim.set_velocity(0.02, 0.005, 0.1)
     integ = sim.integrator
