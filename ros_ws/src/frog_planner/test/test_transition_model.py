@@ -134,3 +134,19 @@ def test_load_selects_the_period_in_si_units(tmp_path, synthetic):
         model.primitive_id("Z")
     with pytest.raises(ValueError, match="not a multiple"):
         TransitionModel.load(path, period=1.52)
+
+
+@pytest.mark.parametrize("max_ball", [0.0, math.inf])
+@pytest.mark.parametrize("k", [1, 3])
+def test_relative_metric_pruned_and_full_searches_both_match_brute_force(monkeypatch, max_ball, k):
+    from frog_planner.core import transition_model
+    monkeypatch.setattr(transition_model, "_RELATIVE_MAX_BALL", max_ball)   # 0: all full, inf: all pruned
+    init, trans = _random_model_arrays(500, seed=2)
+    model = TransitionModel(init, trans, list("ABCDEFGHI"), metric="relative", k=k)
+    scale = [np.ptp(init[:, c]) for c in range(3)]
+    queries = _queries(40, seed=9)
+    idx, dist = model.nearest(queries)
+    for q, got_idx, got_dist in zip(queries, idx, dist):
+        want_idx, want_dist = _brute_force(init, q, "relative", k, scale)
+        assert list(got_idx) == want_idx
+        np.testing.assert_allclose(got_dist, want_dist, rtol=1e-9)

@@ -13,13 +13,16 @@ Two neighbour metrics over the library's initial body velocities v_k = (u_k, v_k
 With ``k > 1`` the transitions of the k nearest states are averaged (heading as a circular mean).
 """
 
+import itertools
+
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .library_file import load_motion_library
 
 METRICS = ("euclidean", "relative")
-_RELATIVE_CHUNK = 128  # queries per block in the brute-force relative metric (bounds memory)
+_RELATIVE_PROBES = 7       # extra Euclidean neighbours probed to bound the relative distance
+_RELATIVE_MAX_BALL = 0.3   # scaled radius above which a query is ranked against all states
 
 
 def world_to_body_velocity(heading, world_velocity):
@@ -122,8 +125,7 @@ class TransitionModel:
         self.scale = scale
         self.relative_floor = float(relative_floor)
         self.source = str(source)
-        self._tree = cKDTree(self.initial_states / scale) if metric == "euclidean" else None
-        self._states_by_component = [np.ascontiguousarray(self.initial_states[:, c]) for c in range(3)]
+        self._tree = cKDTree(self.initial_states / scale)
         # Primitive-major -> state-major copy so one gather returns all P transitions of a state.
         self._by_state = np.ascontiguousarray(np.transpose(self.transitions, (1, 0, 2)))  # (N, P, 6)
 
@@ -189,27 +191,54 @@ class TransitionModel:
         if self.metric == "euclidean":
             dist, idx = self._tree.query(q / self.scale, k=self.k)
             return idx.reshape(len(q), self.k), dist.reshape(len(q), self.k)
-        idx = np.empty((len(q), self.k), dtype=np.intp)
-        dist = np.empty((len(q), self.k))
+        return self._nearest_relative(q)
+
+    def _nearest_relative(self, q):
+        """Algorithm 1 step 6 (guarded), exact, with KD-tree pruning.
+
+        In the tree's scaled coordinates q' = q / scale the relative metric is a weighted
+        Euclidean one, d_rel^2 = sum_c alpha_c^2 (q'_c - s'_c)^2 with alpha_c = scale_c / den_c,
+        so d_rel >= min(alpha) * d'. A few Euclidean-nearest states give an upper bound D on the
+        k-th smallest d_rel; every state that can beat it lies within D / min(alpha) of q' and is
+        fetched with a ball query, then ranked exactly (ties to the lower index, like brute force).
+        Queries whose ball would be large are ranked against all states instead.
+        """
+        n_q, k = len(q), self.k
         floor = self.relative_floor * self.scale
-        rows = np.arange(min(len(q), _RELATIVE_CHUNK))[:, None]
-        for lo in range(0, len(q), _RELATIVE_CHUNK):
-            block = q[lo:lo + _RELATIVE_CHUNK]
-            weight = 1.0 / np.maximum(np.abs(block), floor) ** 2            # 1 / guarded v_i^2
-            # d_k^2 = sum_c ((v_c - v_kc) / v_c)^2 (step 6), one component at a time, in place.
-            d2 = np.zeros((len(block), self.n_states))
-            for c in range(3):
-                diff = np.subtract(block[:, c, None], self._states_by_component[c][None, :])
-                np.multiply(diff, diff, out=diff)
-                np.multiply(diff, weight[:, c, None], out=diff)
-                d2 += diff
-            if self.k == 1:
-                part = np.argmin(d2, axis=1)[:, None]
+        den = np.maximum(np.abs(q), floor)                                   # guarded v_i
+        scaled = q / self.scale
+        n_probe = min(self.n_states, k + _RELATIVE_PROBES)
+        _, probe = self._tree.query(scaled, k=n_probe)
+        probe = probe.reshape(n_q, n_probe)
+        d_probe = np.sqrt(np.sum(((q[:, None, :] - self.initial_states[probe]) / den[:, None, :]) ** 2, axis=-1))
+        bound = np.partition(d_probe, k - 1, axis=1)[:, k - 1]
+        radius = bound / np.min(self.scale / den, axis=1) * (1.0 + 1e-9) + 1e-12
+        idx = np.empty((n_q, k), dtype=np.intp)
+        dist = np.empty((n_q, k))
+        wide = radius > _RELATIVE_MAX_BALL
+        if np.any(wide):                                                     # brute force over all states
+            w = np.flatnonzero(wide)
+            d = np.sqrt(np.sum(((q[w, None, :] - self.initial_states[None]) / den[w, None, :]) ** 2, axis=-1))
+            if k == 1:
+                part = np.argmin(d, axis=1)[:, None]
             else:
-                part = np.argpartition(d2, self.k - 1, axis=1)[:, :self.k]
-                part = np.take_along_axis(part, np.argsort(d2[rows[:len(block)], part], axis=1), axis=1)
-            idx[lo:lo + len(block)] = part
-            dist[lo:lo + len(block)] = np.sqrt(d2[rows[:len(block)], part])
+                part = np.argpartition(d, k - 1, axis=1)[:, :k]
+                rows = np.arange(len(w))[:, None]
+                part = np.take_along_axis(part, np.lexsort((part, d[rows, part]), axis=1), axis=1)
+            idx[w] = part
+            dist[w] = np.take_along_axis(d, part, axis=1)
+        narrow = np.flatnonzero(~wide)
+        if len(narrow):
+            lists = self._tree.query_ball_point(scaled[narrow], radius[narrow])
+            lengths = np.fromiter((len(c) for c in lists), dtype=np.intp, count=len(narrow))
+            cand = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.intp, count=int(lengths.sum()))
+            owner = np.repeat(narrow, lengths)
+            d = np.sqrt(np.sum(((q[owner] - self.initial_states[cand]) / den[owner]) ** 2, axis=1))
+            order = np.lexsort((cand, d, owner))                 # by query, then distance, then index
+            starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+            pick = order[starts[:, None] + np.arange(k)]         # each ball holds the k probes that set D
+            idx[narrow] = cand[pick]
+            dist[narrow] = d[pick]
         return idx, dist
 
     def lookup(self, body_velocities):
