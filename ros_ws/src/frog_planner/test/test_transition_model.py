@@ -150,3 +150,11 @@ def test_relative_metric_pruned_and_full_searches_both_match_brute_force(monkeyp
         want_idx, want_dist = _brute_force(init, q, "relative", k, scale)
         assert list(got_idx) == want_idx
         np.testing.assert_allclose(got_dist, want_dist, rtol=1e-9)
+
+
+def test_states_marked_not_converged_are_dropped_when_loading(tmp_path, synthetic):
+    arrays = synthetic.library_arrays(n_states=10, horizon=1.5, sample_interval=0.5)
+    arrays["converged"][6, 4] = False          # row left finite: the flag alone must drop state 4
+    model = TransitionModel.load(synthetic.write_library(tmp_path / "lib.npz", arrays), period=1.5)
+    assert model.n_states == 9 and model.dropped_states == 1
+    assert not np.any(np.all(model.initial_states == arrays["initial_states"][4], axis=1))

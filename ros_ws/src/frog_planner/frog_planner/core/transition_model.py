@@ -149,8 +149,13 @@ class TransitionModel:
 
     @classmethod
     def from_library(cls, library, period=1.5, metric="euclidean", k=1, scale=None, relative_floor=0.05):
-        """Transition model from a :class:`MotionLibrary` for period T in s."""
-        return cls(library.initial_states, library.transitions_at(period), library.primitive_names,
+        """Transition model from a :class:`MotionLibrary` for period T in s.
+
+        Initial states with a failed simulation (``converged`` False) for any primitive are dropped.
+        """
+        transitions = library.transitions_at(period)
+        transitions[~library.converged] = np.nan
+        return cls(library.initial_states, transitions, library.primitive_names,
                    library.primitive_bits, period, metric, k, scale, relative_floor, library.source)
 
     @property
