@@ -1,0 +1,83 @@
+"""``frog-planner-eval``: closed-loop path following on the simulated frog, in one process."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+EPILOG = """examples:
+  frog-planner-eval --library runs/library/default.npz --path all --out runs/eval
+  frog-planner-eval --library LIB --path ellipse --depth 2 --metric relative --out runs/eval
+  frog-planner-eval --library LIB --compare --out runs/compare     # depths 1-3 x both metrics
+  frog-planner-eval --library LIB --path line --lateral-offset 0.05 --out runs/offset
+
+Writes per run <path>_d<depth>_<metric>.{json,png,npz} (Fig. 5d-g and S3 style plots) and
+a metrics.json summary into --out.
+"""
+
+
+def _run(args, path_name, depth, metric, model_cache):
+    from frog_planner.core.transition_model import TransitionModel
+    from frog_planner.core.tree_search import CostWeights
+    from frog_planner.evaluation import PATHS, run_closed_loop, save_result
+    key = (metric, args.k)
+    if key not in model_cache:
+        model_cache[key] = TransitionModel.load(args.library, period=args.period, metric=metric,
+                                                k=args.k)
+    path = PATHS[path_name]()
+    res = run_closed_loop(path, model_cache[key], depth=depth, period=args.period,
+                          weights=CostWeights(args.w_a, args.w_b, args.w_c),
+                          start_offset=(0.0, args.lateral_offset, 0.0), max_time=args.max_time)
+    files = save_result(res, args.out)
+    m = res.metrics
+    print(f"{path_name:8s} depth {depth} {metric:9s}: goal {'yes' if m['goal_reached'] else 'NO '} "
+          f"t={m['completion_time_s'] or float('nan'):6.1f} s  mean {100 * m['mean_distance_m']:5.2f} cm  "
+          f"max {100 * m['max_distance_m']:5.2f} cm  speed {100 * m['mean_speed_along_path_m_per_s']:4.2f} cm/s  "
+          f"prims {m['primitives_used']}", flush=True)
+    return {**m, **files}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="frog-planner-eval", description=__doc__, epilog=EPILOG,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--library", type=Path, required=True, help="motion library (.npz)")
+    ap.add_argument("--path", choices=["line", "sine", "ellipse", "all"], default="all")
+    ap.add_argument("--depth", type=int, default=1)
+    ap.add_argument("--metric", choices=["euclidean", "relative"], default="euclidean")
+    ap.add_argument("--k", type=int, default=1, help="nearest neighbours averaged")
+    ap.add_argument("--period", type=float, default=1.5, help="primitive period T [s]")
+    ap.add_argument("--w-a", type=float, default=500.0)
+    ap.add_argument("--w-b", type=float, default=50.0)
+    ap.add_argument("--w-c", type=float, default=300.0)
+    ap.add_argument("--lateral-offset", type=float, default=0.0, help="start offset left of the path [m]")
+    ap.add_argument("--max-time", type=float, default=None, help="give up after [s]")
+    ap.add_argument("--compare", action="store_true", help="depths 1-3 x both metrics on every path")
+    ap.add_argument("--out", type=Path, required=True)
+    args = ap.parse_args(argv)
+    from frog_planner.core.library_file import LibraryFormatError
+    paths = ["line", "sine", "ellipse"] if args.path == "all" or args.compare else [args.path]
+    runs = ([(p, d, m) for m in ("euclidean", "relative") for d in (1, 2, 3) for p in paths]
+            if args.compare else [(p, args.depth, args.metric) for p in paths])
+    cache: dict = {}
+    try:
+        results = [_run(args, *r, cache) for r in runs]
+    except (LibraryFormatError, ValueError, OSError) as exc:
+        print(f"frog-planner-eval: error: {exc}", file=sys.stderr)
+        return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "metrics.json").write_text(json.dumps(results, indent=1))
+    if args.compare or len(results) > 1:
+        print(f"\n{'path':8s} {'depth':>5} {'metric':>9} {'goal':>5} {'time s':>7} {'mean cm':>8} "
+              f"{'max cm':>7} {'cm/s':>6}")
+        for r in results:
+            print(f"{r['path']:8s} {r['depth']:5d} {r['metric']:>9} {str(r['goal_reached']):>5} "
+                  f"{(r['completion_time_s'] or float('nan')):7.1f} {100 * r['mean_distance_m']:8.2f} "
+                  f"{100 * r['max_distance_m']:7.2f} {100 * r['mean_speed_along_path_m_per_s']:6.2f}")
+    print(f"\nwrote {args.out / 'metrics.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

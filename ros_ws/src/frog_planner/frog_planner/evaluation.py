@@ -1,0 +1,193 @@
+"""Closed-loop evaluation in one process: DER simulator + library planner (paper Fig. 5, S3).
+
+Not part of the core: it joins this package's planner core with the frog_sim simulator
+(the two cores stay independent; this module is where they meet, like the ROS graph).
+Every period T the planner sees the simulator's rigid-body state (ground truth), picks a
+primitive, and the simulator executes it for T seconds.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path as FsPath
+from typing import Optional
+
+import numpy as np
+
+from frog_planner.core.paths import Path, ellipse_path, line_path, sinusoid_path
+from frog_planner.core.planner import Planner
+from frog_planner.core.transition_model import TransitionModel
+from frog_planner.core.tree_search import CostWeights
+
+PATHS = {"line": line_path, "sine": sinusoid_path, "ellipse": ellipse_path}
+
+
+@dataclass
+class ClosedLoopResult:
+    """A closed-loop run (SI units): samples of the robot, decisions, metrics."""
+
+    path: Path
+    time: np.ndarray                 # (S,) s
+    pose: np.ndarray                 # (S, 3) x m, y m, heading rad
+    distance: np.ndarray             # (S,) distance of the COM to the path, m
+    decisions: list = field(default_factory=list)   # dicts per period
+    metrics: dict = field(default_factory=dict)
+
+
+def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
+                    weights: CostWeights = CostWeights(), period: float = 1.5,
+                    max_time: Optional[float] = None, start_offset=(0.0, 0.0, 0.0),
+                    sim_params: Optional[dict] = None, sample_interval: float = 0.05,
+                    simulation=None) -> ClosedLoopResult:
+    """Follow ``path`` with the simulated frog until the goal or ``max_time``.
+
+    Parameters
+    ----------
+    path : Path
+    model : TransitionModel
+        Built for ``period``.
+    depth : int
+        Tree depth H.
+    weights : CostWeights
+        Eq. 19 weights.
+    period : float
+        Primitive period T [s].
+    max_time : float, optional
+        Give up after this long [s] (default: time to cover the path at 0.5 cm/s).
+    start_offset : (float, float, float)
+        Start pose relative to the path's start: along-track [m], lateral (left) [m],
+        heading [rad], in the frame of the path's initial tangent.
+    sim_params : dict, optional
+        FrogParameters overrides for the simulator.
+    simulation : FrogSimulation, optional
+        Reuse a simulator (it is reset).
+
+    Returns
+    -------
+    ClosedLoopResult
+    """
+    from frog_sim.core.model_parameters import FrogParameters
+    from frog_sim.core.simulation import FrogSimulation
+
+    sim = simulation or FrogSimulation(FrogParameters().replace(**(sim_params or {})))
+    sim.reset()
+    h0 = float(path.tangent_headings[0])
+    c, s = np.cos(h0), np.sin(h0)
+    x0 = path.points[0] + start_offset[0] * np.array([c, s]) + start_offset[1] * np.array([-s, c])
+    sim.set_pose(float(x0[0]), float(x0[1]), h0 + start_offset[2])
+    planner = Planner(model, path, weights, depth)
+    max_time = max_time or path.length / 0.005
+    stride = int(round(sample_interval / sim.time_step))
+    steps_per_period = int(round(period / sim.time_step))
+    times, poses = [], []
+    decisions = []
+    goal_time = None
+    decide_s = []
+
+    def sample():
+        st = sim.rigid_body_state()
+        times.append(sim.time)
+        poses.append([st.com[0], st.com[1], st.heading])
+        return st
+
+    st = sample()
+    while sim.time < max_time:
+        t0 = time.perf_counter()
+        d = planner.decide([st.com[0], st.com[1], st.heading],
+                           [st.body_velocity[0], st.body_velocity[1], st.yaw_rate])
+        decide_s.append(time.perf_counter() - t0)
+        decisions.append({"time": sim.time, "primitive": d.name, "primitive_id": d.primitive_id,
+                          "total_cost": d.total_cost, "progress": d.progress,
+                          "distance_to_path": d.distance_to_path,
+                          "current_cost": d.current_cost,
+                          "current_terms": [d.current_cost_terms.distance, d.current_cost_terms.heading,
+                                            d.current_cost_terms.progress],
+                          "predicted_pose": d.predicted_pose.tolist()})
+        if d.goal_reached:
+            goal_time = sim.time
+            break
+        sim.execute_primitive(d.primitive_id)
+        done = 0
+        while done < steps_per_period:
+            k = min(stride, steps_per_period - done)
+            sim.step(k)
+            done += k
+            st = sample()
+    t = np.array(times)
+    pose = np.array(poses)
+    dist = np.array([path.distance_to(p) for p in pose])
+    counts = Counter(d["primitive"] for d in decisions if not (goal_time and d is decisions[-1]))
+    progress = decisions[-1]["progress"] if decisions else 0.0
+    end = goal_time if goal_time is not None else float(t[-1])
+    metrics = {
+        "path": path.name, "path_length_m": path.length, "depth": depth, "period_s": period,
+        "metric": model.metric, "k_neighbours": model.k,
+        "goal_reached": goal_time is not None,
+        "completion_time_s": goal_time,
+        "final_progress": progress,
+        "mean_distance_m": float(dist.mean()), "max_distance_m": float(dist.max()),
+        "mean_speed_along_path_m_per_s": float(progress * path.length / end) if end > 0 else 0.0,
+        "primitives_used": dict(sorted(counts.items())),
+        "decisions": len(decisions),
+        "median_decision_latency_s": float(np.median(decide_s)) if decide_s else None,
+    }
+    return ClosedLoopResult(path, t, pose, dist, decisions, metrics)
+
+
+def plot_run(result: ClosedLoopResult, png) -> None:
+    """Paper Fig. 5d-g (path over reference, distance vs time) and Fig. S3 (cost terms)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    ax = axes[0]
+    ref = result.path.points
+    ax.plot(ref[:, 0] * 100, ref[:, 1] * 100, "k--", lw=1.2, label="reference path")
+    ax.plot(result.pose[:, 0] * 100, result.pose[:, 1] * 100, color="tab:blue", lw=1.5,
+            label="robot (centre of mass)")
+    dec = result.decisions
+    if dec:
+        pts = np.array([[d["time"], *d["predicted_pose"]] for d in dec])
+        ax.plot(pts[:, 1] * 100, pts[:, 2] * 100, ".", color="tab:orange", ms=4,
+                label="predicted next pose")
+    ax.plot(*(ref[0] * 100), "go", label="start")
+    ax.plot(*(ref[-1] * 100), "r*", ms=12, label="goal")
+    ax.set_aspect("equal")
+    ax.set(xlabel="x [cm]", ylabel="y [cm]", title=f"{result.path.name}: path following")
+    ax.legend(fontsize=8)
+    ax = axes[1]
+    ax.plot(result.time, result.distance * 100)
+    m = result.metrics
+    ax.axhline(m["mean_distance_m"] * 100, ls="--", color="k",
+               label=f"mean {m['mean_distance_m'] * 100:.2f} cm, max {m['max_distance_m'] * 100:.2f} cm")
+    ax.set(xlabel="time [s]", ylabel="distance to path [cm]", title="tracking error")
+    ax.legend(fontsize=8)
+    ax = axes[2]
+    if dec:
+        t = [d["time"] for d in dec]
+        terms = np.array([d["current_terms"] for d in dec])
+        for j, name in enumerate(("w_a * distance", "w_b * heading error", "w_c * (1 - progress)")):
+            ax.plot(t, terms[:, j], label=name)
+        ax.plot(t, terms.sum(axis=1), "k", lw=1.5, label="total (eq. 19)")
+    ax.set(xlabel="time [s]", ylabel="cost", title="cost terms at the measured pose")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def save_result(result: ClosedLoopResult, folder) -> dict:
+    """Write ``<name>.json`` (metrics + decisions), ``<name>.png`` and ``<name>.npz`` samples."""
+    folder = FsPath(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    stem = f"{result.path.name}_d{result.metrics['depth']}_{result.metrics['metric']}"
+    np.savez(folder / f"{stem}.npz", time=result.time, pose=result.pose, distance=result.distance,
+             path=result.path.points)
+    (folder / f"{stem}.json").write_text(json.dumps(
+        {"metrics": result.metrics, "decisions": result.decisions,
+         "units": {"time": "s", "pose": ["m", "m", "rad"], "distance": "m"}}, indent=1))
+    plot_run(result, folder / f"{stem}.png")
+    return {"json": str(folder / f"{stem}.json"), "png": str(folder / f"{stem}.png")}
