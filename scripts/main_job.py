@@ -1,20 +1,23 @@
-"""Main job: the simulated frog swimming a gait, as a real node graph, recorded and plotted.
+"""Main job: the frog following a path in closed loop on the simulated robot, as a node graph.
 
-Starts ``sim_node`` (frog_sim) and ``recorder`` (frog_logger) as separate processes on an
-isolated ROS domain, lets the frog swim for ``--duration`` simulated seconds, stops both
-cleanly, then reads the MCAP recording back and writes
+Starts ``sim_node`` (frog_sim; its ground truth is also published as ``/frog/odom``),
+``planner_node`` (frog_planner) and ``recorder`` (frog_logger) as separate processes on an
+isolated ROS domain, runs until the planner reports the goal (or ``--max-time``), stops
+everything cleanly, and writes, from the MCAP recording:
 
-    runs/main_<date>_<time>/recording/sim_000.mcap   the log (Foxglove / mcap tools / frog-log)
-    runs/main_<date>_<time>/swim.png                 COM path with rod snapshots, speed, heading
-    runs/main_<date>_<time>/summary.json             figures of the run, with units
+    runs/main_<date>_<time>/recording/loop_000.mcap   the log (Foxglove / mcap tools / frog-log)
+    runs/main_<date>_<time>/closed_loop.png           path over the reference, distance, cost terms
+    runs/main_<date>_<time>/metrics.json              tracking metrics, with units
 
-(The planner issue turns this into the closed loop on a reference path.)
+On first use it generates the default motion library (200 initial states x 9 primitives,
+3 s horizon; a few minutes on 2 cores) into runs/library/frog_default.npz.
 
 Examples
 --------
-./dev main                                   # 10 % EGaIn, 1.0 Hz, phase 0.5, 20 s
-./dev main --frequency 0.6 --duration 30     # another measured gait frequency
-./dev main --real-time-factor 3              # faster than real time
+./dev main                                   # line path, from the path start
+./dev main --path ellipse --lateral-offset 0.02
+./dev main --path sine --real-time-factor 3  # faster than real time (sim publishes /clock)
+./dev main --mode gait --frequency 1.0       # open loop: swim a gait (no planner)
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -30,151 +35,274 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 from ros_harness import NodeProcess, acquire_domain, ros_args  # noqa: E402
 
+DEFAULT_LIBRARY = ROOT / "runs" / "library" / "frog_default.npz"
+TOPICS = ["/frog/sim/odom", "/frog/sim/shape", "/frog/primitive", "/frog/planner/status",
+          "/frog/path", "/diagnostics"]
 
-def run_graph(args, out: Path) -> Path:
+
+def ensure_library(path: Path, states: int) -> Path:
+    if path.exists():
+        return path
+    print(f"generating the default motion library on first use: {states} states x 9 primitives "
+          f"-> {path}", flush=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    proc = NodeProcess(["frog-library", "generate", "--states", str(states), "--horizon", "3.0",
+                        "--out", str(path)], dict(os.environ), path.with_suffix(".log"), "library")
+    while proc.running():
+        time.sleep(2.0)
+        tail = re.findall(r"(\d+)/(\d+) \[", proc.log_text()[-400:])
+        if tail:
+            print(f"\r  library states {tail[-1][0]}/{tail[-1][1]}", end="", flush=True)
+    print()
+    if proc.proc.returncode != 0 or not path.exists():
+        raise RuntimeError(f"library generation failed:\n{proc.log_text()[-3000:]}")
+    return path
+
+
+def start_graph(args, out: Path, domain, planner: bool):
+    import numpy as np
+
+    from frog_planner.evaluation import PATHS
+    procs = []
+    rec = NodeProcess(["recorder", *ros_args({"output_dir": str(out / "recording"),
+                                              "file_prefix": "loop", "topics": TOPICS})],
+                      domain.env, out / "recorder.log", "recorder")
+    procs.append(rec)
+    rec.wait_for_log("recording topics", 30)
+    sim_params = {"real_time_factor": args.real_time_factor,
+                  "publish_clock": args.real_time_factor != 1.0,
+                  "model.egain_vol_pct": args.egain}
+    if planner:
+        path = PATHS[args.path]()
+        h0 = float(path.tangent_headings[0])
+        x0 = path.points[0] + args.lateral_offset * np.array([-math.sin(h0), math.cos(h0)])
+        sim_params.update({"odom_alias_topic": "/frog/odom", "initial_x": float(x0[0]),
+                           "initial_y": float(x0[1]), "initial_heading": h0})
+    else:
+        sim_params.update({"gait_frequency_hz": args.frequency, "gait_phase_offset": args.phase})
+    sim = NodeProcess(["sim_node", *ros_args(sim_params)], domain.env, out / "sim_node.log",
+                      "sim_node")
+    procs.append(sim)
+    sim.wait_for_log("simulating the frog", 120)
+    if planner:
+        pl = NodeProcess(["planner_node", *ros_args({
+            "library_file": str(args.library), "path_type": args.path, "period": args.period,
+            "depth": args.depth, "metric": args.metric,
+            "use_sim_time": args.real_time_factor != 1.0})],
+            domain.env, out / "planner_node.log", "planner_node")
+        procs.append(pl)
+        pl.wait_for_log("following a", 60)
+    return procs
+
+
+def run(args, out: Path, planner: bool) -> Path:
     from tqdm import tqdm
     domain = acquire_domain()
     procs = []
     try:
-        rec_dir = out / "recording"
-        recorder = NodeProcess(
-            ["recorder", *ros_args({"output_dir": str(rec_dir), "file_prefix": "sim",
-                                    "topics": ["/frog/sim/odom", "/frog/sim/shape",
-                                               "/frog/primitive", "/diagnostics"]})],
-            domain.env, out / "recorder.log", "recorder")
-        procs.append(recorder)
-        recorder.wait_for_log("recording topics", 30)
-        sim = NodeProcess(
-            ["sim_node", *ros_args({"gait_frequency_hz": args.frequency,
-                                    "gait_phase_offset": args.phase,
-                                    "model.egain_vol_pct": args.egain,
-                                    "real_time_factor": args.real_time_factor,
-                                    "duration_s": args.duration})],
-            domain.env, out / "sim_node.log", "sim_node")
-        procs.append(sim)
-        sim.wait_for_log("simulating the frog", 120)
-        wall = args.duration / args.real_time_factor
-        with tqdm(total=round(wall), unit="s", desc="swimming (wall time)") as bar:
-            t0 = time.monotonic()
-            while time.monotonic() - t0 < wall + 1.0:
+        procs = start_graph(args, out, domain, planner)
+        pl = procs[-1] if planner else None
+        limit = (args.max_time if planner else args.duration) / args.real_time_factor
+        t0 = time.monotonic()
+        with tqdm(total=round(limit), unit="s", desc="closed loop (wall s)" if planner
+                  else "swimming (wall s)") as bar:
+            while time.monotonic() - t0 < limit:
                 time.sleep(0.5)
                 bar.n = min(round(time.monotonic() - t0), bar.total)
                 bar.refresh()
-                if not sim.running():
-                    raise RuntimeError(f"sim_node exited early:\n{sim.log_text()[-3000:]}")
+                for p in procs:
+                    if not p.running():
+                        raise RuntimeError(f"{p.name} exited early:\n{p.log_text()[-3000:]}")
+                if pl is not None and "goal reached" in pl.log_text():
+                    bar.set_description("goal reached")
+                    break
+        time.sleep(1.0)
         for p in reversed(procs):
-            code = p.stop()
-            if code != 0:
-                print(f"warning: {p.name} exited with {code}; log: {p.log_path}")
+            if p.stop() != 0:
+                print(f"warning: {p.name} exited with {p.proc.returncode}; log {p.log_path}")
     finally:
         for p in procs:
             if p.running():
                 p.stop()
         domain.release()
-    files = sorted(rec_dir.glob("sim_*.mcap"))
+    files = sorted((out / "recording").glob("loop_*.mcap"))
     if not files:
-        raise RuntimeError(f"no recording in {rec_dir}; see {out}/recorder.log")
+        raise RuntimeError(f"no recording in {out / 'recording'}; see {out}/recorder.log")
     return files[0]
 
 
-def analyse(mcap: Path, out: Path, args) -> dict:
+def read_recording(mcap: Path) -> dict:
+    import numpy as np
+
+    from frog_logger.core.log_files import read_messages
+    odom, status, prims, path, shapes = [], [], [], None, []
+    for topic, _, m in read_messages(mcap):
+        if topic in ("/frog/sim/odom", "/frog/primitive", "/frog/planner/status", "/frog/sim/shape"):
+            t = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+        if topic == "/frog/sim/odom":
+            q = m.pose.pose.orientation
+            odom.append([t, m.pose.pose.position.x, m.pose.pose.position.y,
+                         2 * math.atan2(q.z, q.w), m.twist.twist.linear.x])
+        elif topic == "/frog/planner/status":
+            status.append([t, m.primitive_id, m.total_cost, m.cost_distance, m.cost_heading,
+                           m.cost_progress, m.path_progress, m.distance_to_path])
+        elif topic == "/frog/primitive":
+            prims.append((t, m.name))
+        elif topic == "/frog/path":
+            path = np.array([[p.pose.position.x, p.pose.position.y] for p in m.poses])
+        elif topic == "/frog/sim/shape":
+            shapes.append((t, np.array([[p.x, p.y] for p in m.points])))
+    return {"odom": np.array(odom), "status": np.array(status), "primitives": prims,
+            "path": path, "shapes": shapes}
+
+
+def distance_to_polyline(points, path):
+    """Distance [m] of each point to a polyline (independent of the planner's code)."""
+    import numpy as np
+    a, d = path[:-1], np.diff(path, axis=0)
+    p = points[:, None, :]
+    t = np.clip(((p - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0, 1)
+    return np.min(np.linalg.norm(a + t[..., None] * d - p, axis=-1), axis=1)
+
+
+def analyse_closed_loop(mcap: Path, out: Path, args) -> dict:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
+    rec = read_recording(mcap)
+    odom, status, path = rec["odom"], rec["status"], rec["path"]
+    if len(odom) < 10 or path is None:
+        raise RuntimeError(f"recording {mcap} lacks odometry or the path")
+    t0 = odom[0, 0]
+    goal = bool(len(status)) and "goal reached" in (out / "planner_node.log").read_text()
+    if goal:  # the run ends at the goal; the robot coasting on afterwards is not tracking
+        odom = odom[odom[:, 0] <= status[-1, 0] + 1e-6]
+    t = odom[:, 0] - t0
+    dist = distance_to_polyline(odom[:, 1:3], path)
+    active = [p for p in rec["primitives"] if p[1] != "I"]
+    end_t = (status[-1, 0] - t0) if goal else t[-1]
+    progress = float(status[-1, 6]) if len(status) else 0.0
+    length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
+    from collections import Counter
+    metrics = {
+        "path": args.path, "path_length_m": length, "period_s": args.period, "depth": args.depth,
+        "metric": args.metric, "library": str(args.library), "goal_reached": goal,
+        "completion_time_s": float(end_t) if goal else None, "final_progress": progress,
+        "mean_distance_m": float(dist.mean()), "max_distance_m": float(dist.max()),
+        "mean_speed_along_path_m_per_s": progress * length / end_t if end_t > 0 else 0.0,
+        "primitives_used": dict(Counter(n for _, n in active)),
+        "decisions": len(status), "recording": str(mcap),
+        "units": {"distance": "m", "time": "s", "speed": "m/s"},
+    }
+    fig, axes = plt.subplots(1, 3, figsize=(18, 5.5), gridspec_kw={"width_ratios": [1.6, 1, 1]})
+    ax = axes[0]
+    every = max(1, len(rec["shapes"]) // 12)
+    for _, pts in rec["shapes"][::every]:
+        seg = pts.reshape(-1, 2, 2) * 100
+        ax.plot(seg[:, :, 0].T, seg[:, :, 1].T, color="tab:green", alpha=0.25, lw=0.8)
+    ax.plot(path[:, 0] * 100, path[:, 1] * 100, "k--", lw=1.2, label="reference path")
+    ax.plot(odom[:, 1] * 100, odom[:, 2] * 100, color="tab:blue", lw=1.6, label="robot centre of mass")
+    ax.plot(*(path[-1] * 100), "r*", ms=13, label="goal")
+    ax.set_aspect("equal")
+    ax.set(xlabel="x [cm] (tank)", ylabel="y [cm]",
+           title=f"{args.path}: closed loop, T = {args.period} s, depth {args.depth}")
+    ax.legend(fontsize=8)
+    ax = axes[1]
+    ax.plot(t, dist * 100)
+    ax.set(xlabel="time [s]", ylabel="distance to path [cm]",
+           title=f"mean {metrics['mean_distance_m'] * 100:.2f} cm, max {metrics['max_distance_m'] * 100:.2f} cm")
+    ax = axes[2]
+    if len(status):
+        ts = status[:, 0] - t0
+        w = (500.0, 50.0, 300.0)
+        for j, name in enumerate(("w_a * distance", "w_b * heading", "w_c * (1 - progress)")):
+            ax.plot(ts, status[:, 3 + j] * w[j], label=name)
+        ax.plot(ts, status[:, 2], "k", label="total of the chosen branch")
+        ax.legend(fontsize=8)
+    ax.set(xlabel="time [s]", ylabel="cost (eq. 19)", title="planner cost terms")
+    fig.tight_layout()
+    fig.savefig(out / "closed_loop.png", dpi=120)
+    plt.close(fig)
+    metrics["plot"] = str(out / "closed_loop.png")
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    return metrics
 
-    from frog_logger.core.log_files import read_messages
 
-    t, x, y, yaw, vx, vy, wz = [], [], [], [], [], [], []
-    shapes = []
-    for topic, _, m in read_messages(mcap, ["/frog/sim/odom", "/frog/sim/shape"]):
-        stamp = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
-        if topic == "/frog/sim/odom":
-            q = m.pose.pose.orientation
-            t.append(stamp)
-            x.append(m.pose.pose.position.x)
-            y.append(m.pose.pose.position.y)
-            yaw.append(2 * math.atan2(q.z, q.w))
-            vx.append(m.twist.twist.linear.x)
-            vy.append(m.twist.twist.linear.y)
-            wz.append(m.twist.twist.angular.z)
-        else:
-            shapes.append((stamp, np.array([[p.x, p.y] for p in m.points])))
-    if len(t) < 10:
-        raise RuntimeError(f"only {len(t)} odometry messages in {mcap}")
-    t = np.array(t) - t[0]
-    x, y = np.array(x), np.array(y)
-    yaw = np.unwrap(np.array(yaw))
-    vx = np.array(vx)
+def analyse_gait(mcap: Path, out: Path, args) -> dict:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    rec = read_recording(mcap)
+    odom = rec["odom"]
+    t = odom[:, 0] - odom[0, 0]
+    x, y, yaw = odom[:, 1], odom[:, 2], np.unwrap(odom[:, 3])
     steady = t >= min(3.0 / args.frequency, 0.5 * t[-1])
     direction = np.array([math.cos(yaw[0]), math.sin(yaw[0])])
     dist = (np.c_[x, y] - [x[0], y[0]]) @ direction
     speed = float(np.polyfit(t[steady], dist[steady], 1)[0])
-    cycles = t[-1] * args.frequency
-    summary = {
-        "duration_s": float(t[-1]),
-        "odometry_messages": int(len(t)),
-        "gait": {"frequency_hz": args.frequency, "phase_offset": args.phase,
-                 "egain_vol_pct": args.egain},
-        "distance_m": float(math.hypot(x[-1] - x[0], y[-1] - y[0])),
-        "steady_forward_speed_m_per_s": speed,
-        "yaw_drift_deg_per_10_cycles": float(math.degrees(yaw[-1] - yaw[0]) * 10 / cycles),
-        "recording": str(mcap),
-    }
-
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), gridspec_kw={"width_ratios": [1.3, 1]})
-    ax = axes[0]
-    every = max(1, len(shapes) // 8)
-    for k, (ts, pts) in enumerate(shapes[::every]):
-        seg = pts.reshape(-1, 2, 2)
-        for a, b in seg:
-            ax.plot([a[0] * 100, b[0] * 100], [a[1] * 100, b[1] * 100], color="tab:green",
-                    alpha=0.25 + 0.75 * k / max(1, len(shapes[::every]) - 1), lw=1)
-    ax.plot(x * 100, y * 100, color="k", lw=1.5, label="centre of mass")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [cm] (tank frame)")
-    ax.set_ylabel("y [cm]")
-    ax.set_title(f"simulated frog, {args.egain:g} % EGaIn, {args.frequency:g} Hz, "
-                 f"phase {args.phase:g}\n(rod snapshots every {every / 10:g} s from "
-                 f"the start)")
-    ax.legend(loc="best")
-    ax = axes[1]
-    ax.plot(t, vx * 100, lw=1, label="forward velocity (body x)")
-    ax.axhline(speed * 100, color="k", ls="--",
-               label=f"steady mean speed {speed * 100:.2f} cm/s")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("velocity [cm/s]")
-    ax2 = ax.twinx()
-    ax2.plot(t, np.degrees(yaw - yaw[0]), color="tab:red", lw=1, label="heading change")
-    ax2.set_ylabel("heading change [deg]", color="tab:red")
-    ax.legend(loc="upper left")
-    ax.set_title("forward velocity and heading")
+    metrics = {"mode": "gait", "duration_s": float(t[-1]), "frequency_hz": args.frequency,
+               "phase_offset": args.phase, "egain_vol_pct": args.egain,
+               "steady_forward_speed_m_per_s": speed,
+               "yaw_drift_deg_per_10_cycles": float(math.degrees(yaw[-1] - yaw[0]) * 10
+                                                    / (t[-1] * args.frequency)),
+               "recording": str(mcap)}
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
+    for _, pts in rec["shapes"][::max(1, len(rec["shapes"]) // 8)]:
+        seg = pts.reshape(-1, 2, 2) * 100
+        axes[0].plot(seg[:, :, 0].T, seg[:, :, 1].T, color="tab:green", alpha=0.3, lw=0.8)
+    axes[0].plot(x * 100, y * 100, "k", lw=1.5, label="centre of mass")
+    axes[0].set_aspect("equal")
+    axes[0].set(xlabel="x [cm]", ylabel="y [cm]",
+                title=f"{args.egain:g} % EGaIn, {args.frequency:g} Hz, phase {args.phase:g}")
+    axes[1].plot(t, odom[:, 4] * 100, lw=1, label="forward velocity")
+    axes[1].axhline(speed * 100, color="k", ls="--", label=f"steady speed {speed * 100:.2f} cm/s")
+    axes[1].set(xlabel="time [s]", ylabel="velocity [cm/s]")
+    axes[1].legend()
     fig.tight_layout()
     fig.savefig(out / "swim.png", dpi=120)
     plt.close(fig)
-    summary["plot"] = str(out / "swim.png")
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    return summary
+    metrics["plot"] = str(out / "swim.png")
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    return metrics
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--duration", type=float, default=20.0, help="simulated seconds (default 20)")
-    ap.add_argument("--frequency", type=float, default=1.0, help="gait frequency [Hz]")
-    ap.add_argument("--phase", type=float, default=0.5, help="rear-pair phase offset [0, 1)")
+    ap.add_argument("--mode", choices=["closed-loop", "gait"], default="closed-loop")
+    ap.add_argument("--path", choices=["line", "sine", "ellipse"], default="line")
+    ap.add_argument("--lateral-offset", type=float, default=0.0, help="start left of the path [m]")
+    ap.add_argument("--period", type=float, default=1.5, help="primitive period T [s]")
+    ap.add_argument("--depth", type=int, default=1)
+    ap.add_argument("--metric", choices=["euclidean", "relative"], default="euclidean")
+    ap.add_argument("--library", type=Path, default=DEFAULT_LIBRARY)
+    ap.add_argument("--library-states", type=int, default=200, help="size if generated")
+    ap.add_argument("--max-time", type=float, default=90.0, help="simulated seconds at most")
+    ap.add_argument("--duration", type=float, default=20.0, help="gait mode: simulated seconds")
+    ap.add_argument("--frequency", type=float, default=1.0, help="gait mode: frequency [Hz]")
+    ap.add_argument("--phase", type=float, default=0.5, help="gait mode: phase offset")
     ap.add_argument("--egain", type=float, default=10.0, help="EGaIn volume %% of the limbs")
     ap.add_argument("--real-time-factor", type=float, default=1.0)
     ap.add_argument("--out", type=Path, default=None, help="run folder (default runs/main_<time>)")
     args = ap.parse_args(argv)
-    if not (args.duration > 0 and args.real_time_factor > 0):
-        ap.error("--duration and --real-time-factor must be > 0")
+    if not (args.max_time > 0 and args.duration > 0 and args.real_time_factor > 0):
+        ap.error("--max-time, --duration and --real-time-factor must be > 0")
     out = args.out or ROOT / "runs" / time.strftime("main_%Y%m%d_%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
-    mcap = run_graph(args, out)
-    summary = analyse(mcap, out, args)
-    print(json.dumps(summary, indent=2))
-    print(f"\nplot: {summary['plot']}\nlog:  {mcap}  (frog-log info {mcap})")
+    if args.mode == "closed-loop":
+        if args.library == DEFAULT_LIBRARY:
+            ensure_library(args.library, args.library_states)
+        elif not args.library.exists():
+            ap.error(f"library {args.library} does not exist (frog-library generate --out ...)")
+        mcap = run(args, out, planner=True)
+        metrics = analyse_closed_loop(mcap, out, args)
+    else:
+        mcap = run(args, out, planner=False)
+        metrics = analyse_gait(mcap, out, args)
+    print(json.dumps(metrics, indent=2))
+    print(f"\nplot: {metrics['plot']}\nlog:  {mcap}  (frog-log info {mcap})")
     return 0
 
 
