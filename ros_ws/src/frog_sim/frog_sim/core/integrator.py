@@ -30,7 +30,7 @@ from numba import njit
 from .actuation import ActuatorArrays, apply_actuation
 from .elastic_energy import bend_element, stretch_element
 from .fluid import drag_element, drag_prefactors
-from .linear_algebra import build_jacobian_pattern, sparse_lu_factor, sparse_lu_substitute
+from .linear_algebra import build_jacobian_pattern, sparse_lu_factor, sparse_lu_pack, sparse_lu_substitute
 
 STATUS_OK = 0
 STATUS_MAX_ITER = 1
@@ -136,7 +136,8 @@ def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_le
 @njit(cache=True)
 def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0,
                   cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, dynamic,
-                  force_tol, pos_tol, max_iter, lu, rhs, resid, lu_state, reuse, refresh_ratio=0.5):
+                  force_tol, pos_tol, max_iter, lu, rhs, resid, lu_state, reuse, packed,
+                  refresh_ratio=0.5):
     """Newton iterations (eq. 7) with the numba sparse LU; ``x`` holds the guess and result.
 
     ``plan`` = (diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx, op_ptr,
@@ -183,13 +184,14 @@ def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len,
             if st != 0:
                 lu_state[0] = 0
                 return STATUS_BAD_PIVOT, it, norm
+            sparse_lu_pack(lu, diag, low_idx, up_idx, packed)
             lu_state[0] = 1
         prev = norm
         last_fresh = fresh
         for i in range(n):
             rhs[i] = resid[perm[i]]
             x_last[i] = x[i]
-        sparse_lu_substitute(lu, rhs, diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx)
+        sparse_lu_substitute(packed, rhs, low_ptr, low_row, up_ptr, up_col)
         step = 0.0
         for i in range(n):
             dx = rhs[i]
@@ -210,7 +212,7 @@ def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
                f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, force_tol, pos_tol,
                max_iter, act_profile, act_young, act_times, act_offsets, act_bend, act_bend_limb,
                act_bend_sign, act_bend_i, act_edge, act_edge_limb, act_edge_area,
-               lu, rhs, resid, x_prev, v_prev, lu_state, reuse, v_old, refresh_ratio=0.5):
+               lu, rhs, resid, x_prev, v_prev, lu_state, reuse, v_old, packed, refresh_ratio=0.5):
     """Advance ``n_steps`` steps of size ``h`` in place (x, v), actuation included.
 
     The Newton guess extrapolates the velocity linearly, ``x_k + h (2 v_k - v_{k-1})``
@@ -235,7 +237,7 @@ def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
         status, iters, norm = newton_direct(
             x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0, cn, ct,
             f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, True, force_tol, pos_tol,
-            max_iter, lu, rhs, resid, lu_state, reuse, refresh_ratio)
+            max_iter, lu, rhs, resid, lu_state, reuse, packed, refresh_ratio)
         total_iter += iters
         if status != 0:
             for d in range(n):
@@ -328,6 +330,7 @@ class ImplicitEulerIntegrator:
         n = network.n_dof
         plan = self.pattern.lu_plan
         self._lu = np.zeros(plan.nnz + 1)            # last entry: trash slot of fixed DOFs
+        self._packed = np.zeros(plan.low_idx.size + plan.up_idx.size + plan.n)
         self._csr_data = np.zeros(self.pattern.nnz + 1)
         self._maps_lu = self._masked_maps(self.pattern.edge_map_lu, self.pattern.bend_map_lu,
                                           self.pattern.diag_map_lu, plan.nnz)
@@ -434,7 +437,7 @@ class ImplicitEulerIntegrator:
                 self.external_force, self.fixed, *self._maps_lu, pat.lu_plan.perm, self._plan,
                 dynamic, self.force_tolerance,
                 self.position_tolerance, self.max_iterations, self._lu, self._rhs, self._resid,
-                self._lu_state, reuse, self.refresh_ratio)
+                self._lu_state, reuse, self._packed, self.refresh_ratio)
             if status != STATUS_BAD_PIVOT:
                 return status, iters, norm
             self.stats.sparse_fallbacks += 1
@@ -531,7 +534,7 @@ class ImplicitEulerIntegrator:
                 self._plan, self.force_tolerance,
                 self.position_tolerance, self.max_iterations, *act, self._lu, self._rhs,
                 self._resid, self._x_prev, self._v_prev, self._lu_state, self.reuse_jacobian,
-                self._v_old, self.refresh_ratio)
+                self._v_old, self._packed, self.refresh_ratio)
             self.stats.newton_iterations += iters
             self.stats.last_residual = norm
             self.stats.steps += done

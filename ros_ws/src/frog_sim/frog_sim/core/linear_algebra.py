@@ -270,16 +270,34 @@ def sparse_lu_factor(lu, diag, low_ptr, low_idx, up_ptr, up_idx, op_ptr, op_targ
 
 
 @njit(cache=True)
-def sparse_lu_substitute(lu, rhs, diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx):
-    """Forward/backward substitution with the factors; ``rhs`` (elimination order) in place."""
-    n = diag.shape[0]
+def sparse_lu_pack(lu, diag, low_idx, up_idx, packed):
+    """Copy the factors into ``packed`` = [L entries, U entries, 1/diag] in loop order
+    (one indirection less in each of the several substitutions per factorisation)."""
+    n_low = low_idx.shape[0]
+    n_up = up_idx.shape[0]
+    for p in range(n_low):
+        packed[p] = lu[low_idx[p]]
+    for p in range(n_up):
+        packed[n_low + p] = lu[up_idx[p]]
+    for k in range(diag.shape[0]):
+        packed[n_low + n_up + k] = 1.0 / lu[diag[k]]
+
+
+@njit(cache=True)
+def sparse_lu_substitute(packed, rhs, low_ptr, low_row, up_ptr, up_col):
+    """Forward/backward substitution with packed factors; ``rhs`` (elimination order) in place."""
+    n = low_ptr.shape[0] - 1
+    n_low = low_ptr[n]
+    n_up = up_ptr[n]
     for k in range(n):
         rk = rhs[k]
         if rk != 0.0:
             for p in range(low_ptr[k], low_ptr[k + 1]):
-                rhs[low_row[p]] -= lu[low_idx[p]] * rk
+                rhs[low_row[p]] -= packed[p] * rk
+    off = n_low
+    inv = n_low + n_up
     for k in range(n - 1, -1, -1):
         s = rhs[k]
         for p in range(up_ptr[k], up_ptr[k + 1]):
-            s -= lu[up_idx[p]] * rhs[up_col[p]]
-        rhs[k] = s / lu[diag[k]]
+            s -= packed[off + p] * rhs[up_col[p]]
+        rhs[k] = s * packed[inv + k]
