@@ -131,6 +131,10 @@ def test_goal_reached():
     assert closed.goal_reached([0.0, 0.0])    # without progress the position alone decides
     assert not closed.goal_reached([0.0, 0.0], progress=0.0)
     assert closed.goal_reached([0.0, 0.0], progress=0.99)
+    # Past the finish line (x >= 0.4) with progress 1 counts however far to the side.
+    assert path.goal_reached([0.41, 0.08], progress=1.0)
+    assert not path.goal_reached([0.41, 0.08], progress=0.98)
+    assert not path.goal_reached([0.39, 0.08], progress=1.0)
 
 
 def test_waypoints_from_csv(tmp_path):
@@ -195,3 +199,13 @@ def test_projection_in_blocks_equals_one_block():
     first = path.project(pts[:100], 0.05)
     np.testing.assert_array_equal(whole.distance[:100], first.distance)
     np.testing.assert_array_equal(whole.progress[-5:], path.project(pts[-5:], 0.05).progress)
+
+
+@pytest.mark.parametrize("kind", ["line", "sinusoid", "ellipse"])
+def test_start_tangent_aligns_the_curve_with_the_robot(kind):
+    from frog_planner.core.paths import path_from_spec
+    path = path_from_spec(kind, start=(0.2, -0.1), start_tangent=0.7)
+    np.testing.assert_allclose(path.points[0], [0.2, -0.1], atol=1e-12)
+    # Direction of the first short chord, by hand, against the requested heading.
+    chord = path.points[1] - path.points[0]
+    assert math.atan2(chord[1], chord[0]) == pytest.approx(0.7, abs=0.05)

@@ -42,7 +42,7 @@ def ref_step(pose, t):
     return (x + c * t[0] - s * t[1], y + s * t[0] + c * t[1], th + t[2]), (t[3], t[4], t[5])
 
 
-def ref_cost(path, pose, prev_progress):
+def ref_cost(path, pose, prev_progress, lookahead=0.0):
     """Eq. 19: closest point on the path between s_prev and s_prev + window, by looping over segments."""
     pts, arc, L = path.points, path.arc_length, path.length
     s0 = prev_progress * L
@@ -63,18 +63,22 @@ def ref_cost(path, pose, prev_progress):
             best = (d, lo + t * (hi - lo))
     d, s = best
     tangent = np.interp(s, arc, np.unwrap(path.tangent_headings))
+    if lookahead > 0.0:
+        s_ahead = min(s + lookahead, L)
+        tx, ty = np.interp(s_ahead, arc, pts[:, 0]), np.interp(s_ahead, arc, pts[:, 1])
+        tangent = math.atan2(ty - pose[1], tx - pose[0])
     err = abs((pose[2] - tangent + math.pi) % (2 * math.pi) - math.pi)
     return W_A * d + W_B * err + W_C * (1.0 - s / L)
 
 
-def ref_search(states, table, path, pose, vel, depth, metric, k, scale, prev_progress):
+def ref_search(states, table, path, pose, vel, depth, metric, k, scale, prev_progress, lookahead=0.0):
     best_cost, best_seq, leaves = math.inf, None, {}
     for seq in itertools.product(range(len(table)), repeat=depth):
         p, v = pose, vel
         for a in seq:
             p, v = ref_step(p, ref_transition(table, a, ref_nearest(states, v, metric, scale, k)))
         leaves[seq] = p
-        cost = ref_cost(path, p, prev_progress)
+        cost = ref_cost(path, p, prev_progress, lookahead)
         if cost < best_cost:
             best_cost, best_seq = cost, seq
     return best_seq, best_cost, leaves
@@ -107,6 +111,33 @@ def test_search_matches_brute_force(tiny, depth, metric, k):
         want = np.array([leaves[seq] for seq in itertools.product(range(9), repeat=depth)])  # leaf i = digits of i
         np.testing.assert_allclose(result.leaf_poses[:, :2], want[:, :2], atol=1e-12)
         np.testing.assert_allclose(np.cos(result.leaf_poses[:, 2] - want[:, 2]), 1.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("depth", [1, 2])
+def test_search_with_heading_lookahead_matches_brute_force(tiny, depth):
+    states, table = tiny
+    model = TransitionModel(states, table, list("ABCDEFGHI"))
+    scale = [float(np.ptp(states[:, c])) for c in range(3)]
+    path = sinusoid_path()
+    pose, vel, prev = (0.03, 0.03, 0.1), (0.03, 0.0, 0.0), 0.05
+    result = search(model, path, pose, vel, depth, CostWeights(), prev, heading_lookahead=0.08)
+    want_seq, want_cost, _ = ref_search(states, table, path, pose, vel, depth, "euclidean", 1, scale, prev, 0.08)
+    assert result.sequence == want_seq
+    assert result.total_cost == pytest.approx(want_cost, rel=1e-9)
+
+
+def test_heading_lookahead_by_hand():
+    from frog_planner.core.tree_search import path_cost
+    path = line_path(length=0.4)
+    # 5 cm left of the line at x = 0.1, facing +x: the point 0.1 m ahead is (0.2, 0).
+    cost = path_cost(path, [0.1, 0.05, 0.0], CostWeights(), 0.0, heading_lookahead=0.1)
+    assert cost.heading_error[0] == pytest.approx(math.atan2(0.05, 0.1))
+    assert cost.total[0] == pytest.approx(W_A * 0.05 + W_B * math.atan2(0.05, 0.1) + W_C * 0.75)
+    # Near the end the look-ahead point is clipped to the last point (0.4, 0).
+    cost = path_cost(path, [0.38, -0.02, 0.0], CostWeights(), 0.5, heading_lookahead=0.1)
+    assert cost.heading_error[0] == pytest.approx(math.atan2(0.02, 0.02))
+    with pytest.raises(ValueError, match="heading_lookahead -0.1 m"):
+        Planner(TransitionModel(np.zeros((1, 3)), np.zeros((1, 1, 6)), ["A"]), path, heading_lookahead=-0.1)
 
 
 def test_depth_one_is_the_cheapest_single_primitive(tiny):

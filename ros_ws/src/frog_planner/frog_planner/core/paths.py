@@ -286,16 +286,24 @@ class Path:
             Position (x, y) in m, heading ignored.
         progress : float, optional
             The planner's current (monotone) progress. When given, it must also be at least
-            ``goal_min_progress``; pass it for paths whose start lies near their end.
+            ``goal_min_progress``; pass it for paths whose start lies near their end. A
+            progress of 1 also counts when the position has crossed the line through the last
+            point normal to the path (the finish line), however far to the side.
 
         Returns
         -------
         bool
-            True when within ``goal_tolerance`` of the last point (and far enough along).
+            True when within ``goal_tolerance`` of the last point (and far enough along), or
+            past the finish line with progress 1.
         """
         p = np.asarray(pose, dtype=float)[:2]
-        near = float(np.hypot(*(p - self.points[-1]))) <= self.goal_tolerance
-        return bool(near and (progress is None or progress >= self.goal_min_progress))
+        offset = p - self.points[-1]
+        near = float(np.hypot(*offset)) <= self.goal_tolerance
+        if progress is None:
+            return bool(near)
+        end_heading = self.tangent_headings[-1]
+        crossed = progress >= 1.0 and offset[0] * np.cos(end_heading) + offset[1] * np.sin(end_heading) >= 0.0
+        return bool((near and progress >= self.goal_min_progress) or crossed)
 
 
 def _place(local_points, start, heading):
@@ -431,7 +439,7 @@ def waypoint_path_from_csv(file_path, **kwargs):
 PATH_KINDS = ("line", "sinusoid", "ellipse", "waypoints")
 
 
-def path_from_spec(kind, start=(0.0, 0.0), heading=0.0, waypoint_file=None, **params):
+def path_from_spec(kind, start=(0.0, 0.0), heading=0.0, waypoint_file=None, start_tangent=None, **params):
     """Build a path by name, for nodes and evaluators that take the path type as a setting.
 
     Parameters
@@ -444,6 +452,10 @@ def path_from_spec(kind, start=(0.0, 0.0), heading=0.0, waypoint_file=None, **pa
         World heading in rad of the curve's local x axis (ignored for waypoints).
     waypoint_file : str or os.PathLike, optional
         CSV file for kind "waypoints".
+    start_tangent : float, optional
+        If given (rad), ``heading`` is ignored and the curve is rotated so that its tangent at
+        the start points this way (e.g. the robot's heading, so the ellipse, whose tangent at
+        the start is along its local +y, begins straight ahead of the robot).
     **params
         Curve parameters (``length``, ``A``, ``f``, ``s_f``) and :class:`Path` settings
         (``n_points``, ``progress_window``, ``goal_tolerance``, ``goal_min_progress``).
@@ -476,4 +488,7 @@ def path_from_spec(kind, start=(0.0, 0.0), heading=0.0, waypoint_file=None, **pa
             raise ValueError("path type 'waypoints' needs a waypoint_file (CSV with columns x,y in m)")
         return waypoint_path_from_csv(waypoint_file, **params)
     factory = {"line": line_path, "sinusoid": sinusoid_path, "ellipse": ellipse_path}[name]
+    if start_tangent is not None:
+        local_tangent = float(factory(**params).tangent_headings[0])
+        heading = float(start_tangent) - local_tangent
     return factory(start=start, heading=heading, **params)

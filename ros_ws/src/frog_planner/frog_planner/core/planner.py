@@ -101,6 +101,9 @@ class Planner:
         Eq. 19 weights (default: the paper's 500, 50, 300).
     depth : int
         Search depth H, 1-5 (the paper found 1 best on hardware).
+    heading_lookahead : float
+        0 (the paper): heading error against the path tangent; > 0 (m): against the direction
+        to the path point this far ahead of the closest one (see :func:`path_cost`).
 
     Examples
     --------
@@ -110,7 +113,7 @@ class Planner:
     (1, 'B')
     """
 
-    def __init__(self, model, path, weights=CostWeights(), depth=1):
+    def __init__(self, model, path, weights=CostWeights(), depth=1, heading_lookahead=0.0):
         if not isinstance(weights, CostWeights):
             weights = CostWeights(*weights)
         depth = int(depth)
@@ -120,6 +123,9 @@ class Planner:
         self.path = path
         self.weights = weights
         self.depth = depth
+        if not (np.isfinite(heading_lookahead) and heading_lookahead >= 0.0):
+            raise ValueError(f"heading_lookahead {heading_lookahead} m must be a finite number >= 0")
+        self.heading_lookahead = float(heading_lookahead)
         self._progress = 0.0
 
     @property
@@ -155,9 +161,10 @@ class Planner:
         """
         pose = _vector(pose, "pose", "x m, y m, heading rad")
         body_velocity = _vector(body_velocity, "body velocity", "forward m/s, lateral m/s, yaw rate rad/s")
-        now = path_cost(self.path, pose, self.weights, self._progress)
+        now = path_cost(self.path, pose, self.weights, self._progress, self.heading_lookahead)
         self._progress = max(self._progress, float(now.progress[0]))
-        result = search(self.model, self.path, pose, body_velocity, self.depth, self.weights, self._progress)
+        result = search(self.model, self.path, pose, body_velocity, self.depth, self.weights, self._progress,
+                        self.heading_lookahead)
         first = result.first_action
         return Decision(
             primitive_id=int(first), name=self.model.primitive_names[first], total_cost=result.total_cost,

@@ -67,7 +67,7 @@ class PathCost:
     progress: np.ndarray
 
 
-def path_cost(path, poses, weights, previous_progress=0.0):
+def path_cost(path, poses, weights, previous_progress=0.0, heading_lookahead=0.0):
     """Cost of eq. 19 for poses against a path, closest point searched ahead of ``previous_progress``.
 
     Parameters
@@ -78,6 +78,10 @@ def path_cost(path, poses, weights, previous_progress=0.0):
     weights : CostWeights
     previous_progress : float
         Progress in [0, 1] from which the closest point is searched (monotone progress).
+    heading_lookahead : float
+        0 (the paper): the heading error is measured against the path tangent at the closest
+        point. > 0 (m): against the direction from the pose to the path point this far
+        further along (clipped at the end), which rewards turning back towards the path.
 
     Returns
     -------
@@ -85,7 +89,16 @@ def path_cost(path, poses, weights, previous_progress=0.0):
     """
     p = np.atleast_2d(np.asarray(poses, dtype=float))
     proj = path.project(p[:, :2], previous_progress)
-    heading_error = np.abs(wrap_angle(p[:, 2] - proj.tangent_heading))
+    reference = proj.tangent_heading
+    if heading_lookahead > 0.0:
+        target = path.point_at(np.minimum(proj.progress + heading_lookahead / path.length, 1.0))
+        to_target = target - p[:, :2]
+        # At the target itself (only possible at the end) there is no direction: keep the tangent.
+        reference = np.where(np.hypot(to_target[:, 0], to_target[:, 1]) > 1e-9,
+                             np.arctan2(to_target[:, 1], to_target[:, 0]), reference)
+    elif heading_lookahead < 0.0 or not np.isfinite(heading_lookahead):
+        raise ValueError(f"heading_lookahead {heading_lookahead} m must be a finite number >= 0")
+    heading_error = np.abs(wrap_angle(p[:, 2] - reference))
     terms = np.column_stack([weights.distance * proj.distance, weights.heading * heading_error,
                              weights.progress * (1.0 - proj.progress)])
     return PathCost(total=terms.sum(axis=1), terms=terms, distance=proj.distance,
@@ -161,7 +174,8 @@ def expand_tree(model, pose, body_velocity, depth):
     return poses, first
 
 
-def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), previous_progress=0.0):
+def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), previous_progress=0.0,
+           heading_lookahead=0.0):
     """Cheapest of all P^H primitive sequences under eq. 19 (Algorithm 1).
 
     Parameters
@@ -177,13 +191,15 @@ def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), pre
     weights : CostWeights
     previous_progress : float
         The current progress in [0, 1]; leaves' progress is searched ahead of it.
+    heading_lookahead : float
+        See :func:`path_cost` (0: the paper's tangent heading error).
 
     Returns
     -------
     SearchResult
     """
     leaves, first = expand_tree(model, pose, body_velocity, depth)
-    cost = path_cost(path, leaves, weights, previous_progress)
+    cost = path_cost(path, leaves, weights, previous_progress, heading_lookahead)
     best = int(np.argmin(cost.total))
     n_prim = model.n_primitives
     digits = []
