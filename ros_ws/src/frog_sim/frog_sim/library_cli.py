@@ -24,7 +24,7 @@ def cmd_generate(args) -> int:
     from frog_sim.core.motion_library import LibrarySpec, generate_library
     spec = LibrarySpec(n_states=args.states, horizon=args.horizon,
                        sample_interval=args.sample_interval, seed=args.seed,
-                       params={"egain_vol_pct": args.egain})
+                       params={"egain_vol_pct": args.egain}, mirror=not args.no_mirror)
     spec.validate()
     path = generate_library(spec, args.out, work_dir=args.work_dir, workers=args.workers,
                             scheduler=args.scheduler, chunk_size=args.chunk_size)
@@ -45,7 +45,9 @@ def cmd_info(args) -> int:
     conv = lib["converged"]
     print(f"file:        {args.file}")
     print(f"primitives:  {p} ({' '.join(str(x) for x in lib['primitive_names'])})")
-    print(f"states:      {n}   transitions: {p * n}   failed: {int((~conv).sum())}")
+    print(f"states:      {n}   transitions: {p * n}   failed: {int((~conv).sum())}   simulated: "
+          f"{meta['sampling'].get('simulated_transitions', p * n)} (mirror pairs: "
+          f"{meta['sampling'].get('mirror_pairs', False)})")
     print(f"horizon:     {meta['horizon_s']} s, {t} samples every {meta['sample_interval_s']} s")
     s = meta["sampling"]
     print(f"sampling:    seed {s['seed']}, forward {s['forward_velocity_range']} m/s, lateral "
@@ -119,6 +121,8 @@ def build_parser():
     g.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786")
     g.add_argument("--chunk-size", type=int, default=25, help="initial states per chunk")
     g.add_argument("--no-plot", action="store_true")
+    g.add_argument("--no-mirror", action="store_true",
+                   help="simulate every state (default: mirror pairs, half the simulations)")
     g.set_defaults(func=cmd_generate)
     i = sub.add_parser("info", help="summary of a library file")
     i.add_argument("file", type=Path)

@@ -13,7 +13,7 @@ from frog_sim.core.motion_library import (LibraryFileError, LibrarySpec, generat
                                           load_library, simulate_transitions)
 from frog_sim.core.simulation import FrogSimulation
 
-SMALL = dict(n_states=4, horizon=0.2, sample_interval=0.05, seed=3)
+SMALL = dict(n_states=7, horizon=0.2, sample_interval=0.05, seed=3)   # 4 mirror pairs, last cut
 VOLATILE = ("created", "generation_wall_time_s")
 
 
@@ -37,7 +37,7 @@ def reference(tmp_path_factory):
 
 def test_file_contents_follow_the_contract(reference):
     lib = load_library(reference)
-    assert lib["transitions"].shape == (9, 4, 5, 6) and lib["transitions"].dtype == np.float32
+    assert lib["transitions"].shape == (9, 7, 5, 6) and lib["transitions"].dtype == np.float32
     assert list(lib["primitive_names"]) == list("ABCDEFGHI")
     assert np.allclose(lib["times"], [0, 0.05, 0.1, 0.15, 0.2])
     meta = lib["metadata"]
@@ -86,7 +86,7 @@ def test_resume_after_killed_run_gives_identical_file(reference, tmp_path):
     proc.kill()
     proc.wait()
     done_before = sorted(p.name for p in chunks.glob("chunk_*.npz"))
-    assert 2 <= len(done_before) < 4 and not out.exists(), done_before
+    assert 2 <= len(done_before) < 4 and not out.exists(), done_before   # 4 chunks (pairs)
     # a torn temporary file from the kill must not be mistaken for a chunk
     (chunks / "chunk_000003.npz.partial.tmp").write_bytes(b"PK\x03\x04garbage")
     generate_library(LibrarySpec(**SMALL), out, workers=1, chunk_size=1, progress=False)
@@ -138,6 +138,30 @@ def test_loader_rejects_bad_files(reference, tmp_path):
         load_library(tmp_path / "fmt.npz")
     with pytest.raises(LibraryFileError, match="does not exist"):
         load_library(tmp_path / "missing.npz")
+
+
+def test_mirror_pairs_match_direct_simulation(reference, sim):
+    """Rows 2i+1 are reflections of rows 2i; check them against simulating the state."""
+    lib = load_library(reference)
+    states = lib["initial_states"]
+    assert np.allclose(states[1::2], states[0:-1:2] * [1, -1, -1])
+    direct, ok = simulate_transitions(sim, states[3], 0.2, 0.05)
+    stored = lib["transitions"][:, 3]
+    scale = np.abs(direct).max(axis=(0, 1))
+    err = np.abs(stored - direct).max(axis=(0, 1)) / np.maximum(scale, 1e-12)
+    assert ok.all() and err.max() < 1e-5, f"relative error per column {err}"
+    meta = lib["metadata"]["sampling"]
+    assert meta["mirror_pairs"] and meta["simulated_transitions"] == 9 * 4
+
+
+def test_without_mirror_every_state_is_simulated(tmp_path, sim):
+    spec = LibrarySpec(n_states=3, horizon=0.1, sample_interval=0.05, seed=5, mirror=False)
+    lib = load_library(generate_library(spec, tmp_path / "m.npz", workers=1, progress=False))
+    states = lib["initial_states"]
+    assert not np.allclose(states[1], states[0] * [1, -1, -1])
+    direct, _ = simulate_transitions(sim, states[2], 0.1, 0.05)
+    assert np.allclose(lib["transitions"][:, 2], direct, rtol=1e-5, atol=1e-9)
+    assert lib["metadata"]["sampling"]["simulated_transitions"] == 27
 
 
 @pytest.fixture(scope="module")

@@ -58,6 +58,12 @@ class LibrarySpec:
         FrogParameters overrides (e.g. ``{"egain_vol_pct": 10.0}``).
     time_step : float, optional
         Integrator step [s] (default: the simulator's default).
+    mirror : bool
+        Exploit the robot's left-right symmetry: states are drawn in antithetic pairs
+        (s, mirror(s)) -- each still uniform over the symmetric box -- and the transitions of
+        mirror(s) are the mirrored transitions of s under the mirrored primitive (C<->D,
+        E<->F, G<->H), so half of the simulations are exact reflections. Halves the cost;
+        switch off for a model that is not mirror-symmetric.
     """
 
     n_states: int = 200
@@ -69,6 +75,7 @@ class LibrarySpec:
     yaw_rate_range: tuple = (-np.deg2rad(30.0), np.deg2rad(30.0))
     params: Optional[dict] = None
     time_step: Optional[float] = None
+    mirror: bool = True
 
     def validate(self) -> None:
         if self.n_states < 1:
@@ -92,15 +99,39 @@ class LibrarySpec:
                 "lateral_velocity_range": [float(v) for v in self.lateral_range],
                 "yaw_rate_range": [float(v) for v in self.yaw_rate_range],
                 "params": FrogParameters().replace(**(self.params or {})).as_dict(),
-                "time_step_s": float(self.time_step or DEFAULT_TIME_STEP)}
+                "time_step_s": float(self.time_step or DEFAULT_TIME_STEP),
+                "mirror_pairs": bool(self.mirror)}
 
 
 def sample_initial_states(spec: LibrarySpec) -> np.ndarray:
-    """Uniform samples, shape (N, 3): forward [m/s], lateral [m/s], yaw rate [rad/s]."""
+    """Uniform samples, shape (N, 3): forward [m/s], lateral [m/s], yaw rate [rad/s].
+
+    With ``spec.mirror`` rows 2i and 2i+1 are a state and its mirror image (lateral
+    velocity and yaw rate negated); the ranges must then be symmetric about zero.
+    """
     rng = np.random.default_rng(spec.seed)
     lo = np.array([spec.forward_range[0], spec.lateral_range[0], spec.yaw_rate_range[0]])
     hi = np.array([spec.forward_range[1], spec.lateral_range[1], spec.yaw_rate_range[1]])
-    return lo + (hi - lo) * rng.random((spec.n_states, 3))
+    if not spec.mirror:
+        return lo + (hi - lo) * rng.random((spec.n_states, 3))
+    if not (np.isclose(lo[1], -hi[1]) and np.isclose(lo[2], -hi[2])):
+        raise ValueError("mirror pairs need lateral and yaw-rate ranges symmetric about 0, got "
+                         f"{spec.lateral_range} and {spec.yaw_rate_range}")
+    base = lo + (hi - lo) * rng.random(((spec.n_states + 1) // 2, 3))
+    pairs = np.stack([base, base * MIRROR_STATE], axis=1).reshape(-1, 3)
+    return pairs[:spec.n_states]
+
+
+#: Sign flips of a state / transition row under the mirror y -> -y.
+MIRROR_STATE = np.array([1.0, -1.0, -1.0])
+MIRROR_TRANSITION = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])
+
+
+def mirror_primitive_index() -> np.ndarray:
+    """Index of each primitive's mirror image: swap FR<->FL and BL<->BR in its bits."""
+    bits = [PRIMITIVE_BITS[n] for n in PRIMITIVE_NAMES]
+    mirrored = [b[1] + b[0] + b[3] + b[2] for b in bits]
+    return np.array([bits.index(m) for m in mirrored])
 
 
 _SIMULATORS: dict = {}
@@ -169,16 +200,27 @@ def simulate_transitions(sim, initial_state, horizon: float, sample_interval: fl
 
 
 def _library_task(spec_json: dict, start: int, stop: int) -> dict:
-    """Batch task: transitions of initial states ``start:stop`` (see batch.run_chunked)."""
+    """Batch task: transitions of simulated states ``start:stop`` (see batch.run_chunked).
+
+    Without mirror pairs item i is state i; with them item i is the pair (2i, 2i+1) and
+    the second row is the exact reflection of the first (see :class:`LibrarySpec`).
+    """
     sim = _simulator(spec_json)
-    states = np.asarray(spec_json["initial_states"])[start:stop]
+    states = np.asarray(spec_json["initial_states"])
+    mirror = spec_json.get("mirror_pairs", False)
     n_samples = int(round(spec_json["horizon_s"] / spec_json["sample_interval_s"])) + 1
-    trans = np.empty((len(states), len(PRIMITIVE_NAMES), n_samples, 6), dtype=np.float32)
-    conv = np.empty((len(states), len(PRIMITIVE_NAMES)), dtype=bool)
-    for i, state in enumerate(states):
+    rows = 2 if mirror else 1
+    trans = np.empty((stop - start, rows, len(PRIMITIVE_NAMES), n_samples, 6), dtype=np.float32)
+    conv = np.empty((stop - start, rows, len(PRIMITIVE_NAMES)), dtype=bool)
+    perm = mirror_primitive_index()
+    for i, item in enumerate(range(start, stop)):
+        state = states[rows * item]
         t, ok = simulate_transitions(sim, state, spec_json["horizon_s"],
                                      spec_json["sample_interval_s"])
-        trans[i], conv[i] = t.astype(np.float32), ok
+        trans[i, 0], conv[i, 0] = t.astype(np.float32), ok
+        if mirror:
+            trans[i, 1] = (t[perm] * MIRROR_TRANSITION).astype(np.float32)
+            conv[i, 1] = ok[perm]
     return {"transitions": trans, "converged": conv}
 
 
@@ -218,12 +260,15 @@ def generate_library(spec: LibrarySpec, out_path, work_dir=None, workers: Option
     task_spec = dict(spec_json, initial_states=states)
     work = Path(work_dir) if work_dir else out_path.with_name(out_path.name + ".chunks")
     t0 = time.perf_counter()
-    arrays = run_chunked(_library_task, task_spec, spec.n_states, chunk_size, work,
+    n_items = (spec.n_states + 1) // 2 if spec.mirror else spec.n_states
+    arrays = run_chunked(_library_task, task_spec, n_items, chunk_size, work,
                          workers=workers, scheduler=scheduler, progress=progress,
-                         desc="library states")
+                         desc="library states (mirror pairs)" if spec.mirror else "library states")
     elapsed = time.perf_counter() - t0
-    transitions = np.ascontiguousarray(arrays["transitions"].transpose(1, 0, 2, 3))
-    converged = np.ascontiguousarray(arrays["converged"].T)
+    p, t = len(PRIMITIVE_NAMES), arrays["transitions"].shape[-2]
+    per_state = arrays["transitions"].reshape(-1, p, t, 6)[:spec.n_states]
+    transitions = np.ascontiguousarray(per_state.transpose(1, 0, 2, 3))
+    converged = np.ascontiguousarray(arrays["converged"].reshape(-1, p)[:spec.n_states].T)
     times = np.arange(transitions.shape[2]) * spec.sample_interval
     robot = spec_json["params"]
     metadata = {
@@ -231,6 +276,8 @@ def generate_library(spec: LibrarySpec, out_path, work_dir=None, workers: Option
                   "transitions": ["m", "m", "rad", "m/s", "m/s", "rad/s"], "times": "s"},
         "horizon_s": spec.horizon, "sample_interval_s": spec.sample_interval,
         "sampling": {"seed": spec.seed, "distribution": "uniform",
+                     "mirror_pairs": spec.mirror,
+                     "simulated_transitions": n_items * len(PRIMITIVE_NAMES),
                      "forward_velocity_range": spec_json["forward_velocity_range"],
                      "lateral_velocity_range": spec_json["lateral_velocity_range"],
                      "yaw_rate_range": spec_json["yaw_rate_range"]},
