@@ -128,6 +128,24 @@ def test_pose_survives_choosing_a_gait(library):
     assert sim.profile.frequency_hz == 0.8
 
 
+def test_reset_reproduces_a_fresh_run(library):
+    def swim(sim):
+        sim.set_gait(1.0, 0.5)
+        sim.step(200)
+        return sim.node_positions
+    sim = FrogSimulation(library=library)
+    sim.set_gait(1.0, 0.5)                  # builds the model for this profile
+    sim.reset()
+    first = swim(sim)
+    sim.reset()
+    assert sim.time == 0.0 and np.abs(sim.node_velocities).max() == 0.0
+    assert np.array_equal(swim(sim), first)
+    fresh = FrogSimulation(library=library)
+    fresh.set_gait(1.0, 0.5)
+    fresh.reset()
+    assert np.array_equal(swim(fresh), first)
+
+
 def test_primitive_fires_front_then_rear(library):
     sim = FrogSimulation(library=library)
     sim.execute_primitive('B')

@@ -146,8 +146,23 @@ class FrogSimulation:
         self._sync_schedule(force=True)
 
     def reset(self) -> None:
-        """Back to the reference pose at rest, t = 0, no schedule (keeps the profile)."""
-        self._build(self.profile)
+        """Back to the reference pose at rest, t = 0, no schedule (keeps the profile).
+
+        Cheap (no rebuild of the model or the solver plan): used between the many short
+        runs of sweeps and motion libraries.
+        """
+        integ = self.integrator
+        integ.set_state(x=self.model.network.positions.ravel(), v=np.zeros(integ.v.size))
+        integ.time = 0.0
+        integ.kappa0[:] = self.model.network.bend_natural_curvature
+        integ.ei[:] = self.model.network.bend_stiffness
+        integ.ea[:] = self.model.network.edge_stretching_stiffness
+        integ.external_force[:] = 0.0
+        self._schedule = ActivationSchedule.empty()
+        self._gait = None
+        self._horizon = -np.inf
+        self._unwrap = HeadingUnwrapper(0.0)
+        self._sync_schedule(force=True)
 
     def use_profile(self, frequency_hz: float, exact: bool = True) -> CurvatureProfile:
         """Drive the limbs with the profile measured at ``frequency_hz`` for this EGaIn.
