@@ -106,9 +106,9 @@ def _make_sim(args):
     from .core.simulation import DEFAULT_TIME_STEP, FrogSimulation
     try:
         params = FrogParameters().replace(egain_vol_pct=args.egain)
+        return FrogSimulation(params, time_step=args.dt or DEFAULT_TIME_STEP)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    return FrogSimulation(params, time_step=args.dt or DEFAULT_TIME_STEP)
 
 
 def write_outputs(traj, out: Path, title: str, snapshots: int, plot: bool, network=None) -> list[Path]:
