@@ -124,6 +124,11 @@ class ForwardSolver:
     use_numba : bool
         False switches the local step to the plain numpy implementation (benchmark baseline).
 
+    Attributes
+    ----------
+    reuse_memory : bool
+        Seed each L-BFGS solve with the curvature pairs of the previous one (default True).
+
     Examples
     --------
     >>> from softkin_fk.core.models import build_tendon_finger
@@ -136,6 +141,8 @@ class ForwardSolver:
 
     def __init__(self, mesh: SoftMesh, backend: str = 'auto', use_numba: bool = True):
         self.mesh = mesh
+        self.reuse_memory = True
+        self._memory = ([], [])
         self._active = np.ones(len(mesh.actuators), bool)
         self.use_numba = use_numba
         x0 = mesh.vertices
@@ -506,7 +513,11 @@ class ForwardSolver:
         E = self.local_step(x, levels)
         grad = gs.residual(x, self.rhs())          # half gradient, (n_free, 3)
         energies = [E] if record_energy else []
-        S, Y = [], []
+        # curvature pairs of the previous solve (same mesh, nearby state) seed the quasi-Newton
+        # model: consecutive warm-started solves (IK differences, trajectories) then need far
+        # fewer iterations
+        S, Y = self._memory if self.reuse_memory else ([], [])
+        S, Y = list(S), list(Y)
         small = 0
         converged = False
         it = 0
@@ -563,6 +574,7 @@ class ForwardSolver:
             if it >= max(min_iter, 10) and small >= 3:
                 converged = True
                 break
+        self._memory = (S, Y)
         return x, E, np.asarray(energies), it, converged, step_norm, 0
 
     def marker_position(self, actuation, name: str = 'tip', **kw) -> np.ndarray:

@@ -63,7 +63,7 @@ DEFAULT_FINGER_RESOLUTION = 2
 
 
 def build_tendon_finger(resolution: int = DEFAULT_FINGER_RESOLUTION, shape_parameter: float = 1.0,
-                        max_slot_closure: float = 0.6) -> SoftMesh:
+                        max_slot_closure: float = 0.85) -> SoftMesh:
     """The 3-tendon finger of Fig. 12 as a tetrahedral mesh with three cable actuators.
 
     Parameters
