@@ -88,6 +88,7 @@ def start_graph(args, out: Path, domain, planner: bool):
         pl = NodeProcess(["planner_node", *ros_args({
             "library_file": str(args.library), "path_type": args.path, "period": args.period,
             "depth": args.depth, "metric": args.metric,
+            "heading_lookahead": args.heading_lookahead,
             "use_sim_time": args.real_time_factor != 1.0})],
             domain.env, out / "planner_node.log", "planner_node")
         procs.append(pl)
@@ -170,6 +171,8 @@ def analyse_closed_loop(mcap: Path, out: Path, args) -> dict:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
+
+    from frog_planner.evaluation import samples_before_finish
     rec = read_recording(mcap)
     odom, status, path = rec["odom"], rec["status"], rec["path"]
     if len(odom) < 10 or path is None:
@@ -178,6 +181,7 @@ def analyse_closed_loop(mcap: Path, out: Path, args) -> dict:
     goal = bool(len(status)) and "goal reached" in (out / "planner_node.log").read_text()
     if goal:  # the run ends at the goal; the robot coasting on afterwards is not tracking
         odom = odom[odom[:, 0] <= status[-1, 0] + 1e-6]
+    odom = odom[:samples_before_finish(odom[:, 1:3], path)]
     t = odom[:, 0] - t0
     dist = distance_to_polyline(odom[:, 1:3], path)
     active = [p for p in rec["primitives"] if p[1] != "I"]
@@ -187,7 +191,8 @@ def analyse_closed_loop(mcap: Path, out: Path, args) -> dict:
     from collections import Counter
     metrics = {
         "path": args.path, "path_length_m": length, "period_s": args.period, "depth": args.depth,
-        "metric": args.metric, "library": str(args.library), "goal_reached": goal,
+        "metric": args.metric, "heading_lookahead_m": args.heading_lookahead,
+        "library": str(args.library), "goal_reached": goal,
         "completion_time_s": float(end_t) if goal else None, "final_progress": progress,
         "mean_distance_m": float(dist.mean()), "max_distance_m": float(dist.max()),
         "mean_speed_along_path_m_per_s": progress * length / end_t if end_t > 0 else 0.0,
@@ -277,6 +282,8 @@ def main(argv=None) -> int:
     ap.add_argument("--period", type=float, default=1.5, help="primitive period T [s]")
     ap.add_argument("--depth", type=int, default=1)
     ap.add_argument("--metric", choices=["euclidean", "relative"], default="euclidean")
+    ap.add_argument("--heading-lookahead", type=float, default=0.0,
+                    help="planner heading error against the path this far ahead [m]")
     ap.add_argument("--library", type=Path, default=DEFAULT_LIBRARY)
     ap.add_argument("--library-states", type=int, default=200, help="size if generated")
     ap.add_argument("--max-time", type=float, default=90.0, help="simulated seconds at most")

@@ -41,6 +41,7 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
                     weights: CostWeights = CostWeights(), period: float = 1.5,
                     max_time: Optional[float] = None, start_offset=(0.0, 0.0, 0.0),
                     sim_params: Optional[dict] = None, sample_interval: float = 0.05,
+                    heading_lookahead: float = 0.0,
                     simulation=None) -> ClosedLoopResult:
     """Follow ``path`` with the simulated frog until the goal or ``max_time``.
 
@@ -62,6 +63,8 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
         heading [rad], in the frame of the path's initial tangent.
     sim_params : dict, optional
         FrogParameters overrides for the simulator.
+    heading_lookahead : float
+        Heading error against the path this far ahead [m] (0 = the paper's tangent).
     simulation : FrogSimulation, optional
         Reuse a simulator (it is reset).
 
@@ -78,7 +81,7 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     c, s = np.cos(h0), np.sin(h0)
     x0 = path.points[0] + start_offset[0] * np.array([c, s]) + start_offset[1] * np.array([-s, c])
     sim.set_pose(float(x0[0]), float(x0[1]), h0 + start_offset[2])
-    planner = Planner(model, path, weights, depth)
+    planner = Planner(model, path, weights, depth, heading_lookahead=heading_lookahead)
     max_time = max_time or path.length / 0.005
     stride = int(round(sample_interval / sim.time_step))
     steps_per_period = int(round(period / sim.time_step))
@@ -118,13 +121,15 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
             st = sample()
     t = np.array(times)
     pose = np.array(poses)
+    n = samples_before_finish(pose[:, :2], path.points)
+    t, pose = t[:n], pose[:n]
     dist = np.array([path.distance_to(p) for p in pose])
     counts = Counter(d["primitive"] for d in decisions if not (goal_time and d is decisions[-1]))
     progress = decisions[-1]["progress"] if decisions else 0.0
     end = goal_time if goal_time is not None else float(t[-1])
     metrics = {
         "path": path.name, "path_length_m": path.length, "depth": depth, "period_s": period,
-        "metric": model.metric, "k_neighbours": model.k,
+        "metric": model.metric, "k_neighbours": model.k, "heading_lookahead_m": heading_lookahead,
         "goal_reached": goal_time is not None,
         "completion_time_s": goal_time,
         "final_progress": progress,
@@ -135,6 +140,22 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
         "median_decision_latency_s": float(np.median(decide_s)) if decide_s else None,
     }
     return ClosedLoopResult(path, t, pose, dist, decisions, metrics)
+
+
+def samples_before_finish(positions, path_points) -> int:
+    """Number of samples before the robot crosses the finish line (the normal to the path
+    at its end) on its final approach: past it, the distance to the polyline measures
+    overshoot beyond the goal, not tracking. The final approach starts once the nearest
+    path point has been in the second half of the path (so a closed-ish path's start,
+    next to its end, does not count)."""
+    pts = np.asarray(positions, dtype=float)
+    ref = np.asarray(path_points, dtype=float)
+    nearest = np.argmin(np.linalg.norm(pts[:, None, :] - ref[None], axis=-1), axis=1)
+    half_done = np.maximum.accumulate(nearest >= len(ref) // 2)
+    tangent = ref[-1] - ref[-2]
+    past = half_done & (nearest >= len(ref) - 3) & ((pts - ref[-1]) @ tangent > 0)
+    hits = np.nonzero(past)[0]
+    return int(hits[0]) if len(hits) else len(pts)
 
 
 def plot_run(result: ClosedLoopResult, png) -> None:

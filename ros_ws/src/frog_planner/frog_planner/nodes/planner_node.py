@@ -42,6 +42,8 @@ _PARAMS = [
     ("w_distance", 500.0, "eq. 19 weight w_a of the distance to the path"),
     ("w_heading", 50.0, "eq. 19 weight w_b of the heading error"),
     ("w_progress", 300.0, "eq. 19 weight w_c of (1 - progress)"),
+    ("heading_lookahead", 0.0, "heading error against the path this far ahead [m]; 0 = the "
+                               "paper's path tangent at the closest point"),
     ("path_type", "line", "line, sine, ellipse or waypoints"),
     ("path_length", 0.0, "path length/size [m]; 0 = the paper's value for the path type"),
     ("path_start_x", 0.0, "path start x in the world frame [m]"),
@@ -139,7 +141,8 @@ class PlannerNode(Node):
                   ("k_neighbours", p["k_neighbours"] >= 1, ">= 1"),
                   ("stale_periods", p["stale_periods"] > 0, "> 0"),
                   ("goal_tolerance", p["goal_tolerance"] > 0, "> 0 m"),
-                  ("path_length", p["path_length"] >= 0, ">= 0 m")]
+                  ("path_length", p["path_length"] >= 0, ">= 0 m"),
+                  ("heading_lookahead", p["heading_lookahead"] >= 0, ">= 0 m")]
         for name, ok, expected in checks:
             if not ok:
                 raise ConfigurationError(f"parameter {name} = {p[name]!r} must be {expected}")
@@ -157,7 +160,8 @@ class PlannerNode(Node):
             try:
                 model = TransitionModel.load(p["library_file"], period=p["period"],
                                              metric=p["metric"], k=p["k_neighbours"])
-                self.planner = Planner(model, self.path, self.weights, p["depth"])
+                self.planner = Planner(model, self.path, self.weights, p["depth"],
+                                       heading_lookahead=p["heading_lookahead"])
                 self.library_error = None
                 self.get_logger().info(f"library {p['library_file']}: {model.n_states} states, "
                                        f"{model.n_primitives} primitives")
