@@ -331,10 +331,15 @@ def read_volume_mesh(path: str, scale: float = 1.0, shape_parameter: float = 1.0
 
     Raises
     ------
+    FileNotFoundError
+        If the file does not exist.
     ValueError
         If the file holds no tetrahedra or wedges.
     """
     root, ext = os.path.splitext(path)
+    candidates = [path, root + '.node', path + '.node']
+    if not any(os.path.exists(c) for c in candidates):
+        raise FileNotFoundError(f"mesh file {path!r} not found (expected a meshio volume mesh or TetGen .node/.ele)")
     groups = []
     if ext in ('.node', '.ele') or (ext == '' and os.path.exists(path + '.node')):
         verts, tets = read_tetgen(root if ext else path)
