@@ -20,14 +20,23 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "ros_ws" / "src"
 INSTALL = SRC.parent / "install"
-PY_PACKAGES = sorted(p.name for p in SRC.iterdir() if (p / "setup.py").is_file())
-OURS = set(PY_PACKAGES) | {"soft_robot_interfaces"}
+COMMON = "soft_robot_common"   # node plumbing shared by all nodes; no core, no algorithms
+ALL_PY = sorted(p.name for p in SRC.iterdir() if (p / "setup.py").is_file())
+PY_PACKAGES = [p for p in ALL_PY if p != COMMON]
+OURS = set(ALL_PY) | {"soft_robot_interfaces"}
 
 
 def test_expected_packages_exist():
     assert set(PY_PACKAGES) == {"frog_sim", "frog_planner", "frog_vision", "frog_bridge",
                                 "softkin_fk", "frog_logger"}
     assert (SRC / "soft_robot_interfaces" / "CMakeLists.txt").is_file()
+    assert (SRC / COMMON / "setup.py").is_file()
+
+
+def test_common_package_is_only_plumbing():
+    """soft_robot_common may import ROS and the standard library, nothing of ours."""
+    for path in (SRC / COMMON / COMMON).rglob("*.py"):
+        assert not (_imports(path) & (OURS - {COMMON})), path
 
 
 @pytest.mark.parametrize("pkg", PY_PACKAGES)
@@ -100,7 +109,7 @@ def _console_scripts(pkg):
     return re.findall(r"'([\w-]+)\s*=\s*([\w.]+):(\w+)'", text)
 
 
-@pytest.mark.parametrize("pkg", PY_PACKAGES)
+@pytest.mark.parametrize("pkg", ALL_PY)
 def test_console_scripts_installed_and_resolvable(pkg):
     for exe, module, func in _console_scripts(pkg):
         assert (INSTALL / pkg / "lib" / pkg / exe).is_file(), \

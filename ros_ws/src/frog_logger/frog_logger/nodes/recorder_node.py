@@ -10,55 +10,47 @@ from __future__ import annotations
 import importlib
 import json
 import re
-import signal
 import sys
 import time
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from soft_robot_common import ConfigurationError, declare_parameters, run_node
 
 from frog_logger.core.message_definitions import MessageDefinitionError, full_message_definition
 from frog_logger.core.recording import Recording, RecordingError
 
 _PARAMS = [
-    # name, default, type, description
-    ("topics", [""], ParameterType.PARAMETER_STRING_ARRAY,
+    # name, default (its type is the parameter's type), description
+    ("topics", [""],
      "topics to record; empty (or ['']) records every topic and keeps discovering new ones"),
-    ("exclude_regex", "", ParameterType.PARAMETER_STRING,
+    ("exclude_regex", "",
      "topics matching this regular expression are not recorded (all-topics mode)"),
-    ("include_hidden", False, ParameterType.PARAMETER_BOOL,
+    ("include_hidden", False,
      "also record hidden topics (a name part starting with '_')"),
-    ("output_dir", "recordings", ParameterType.PARAMETER_STRING,
+    ("output_dir", "recordings",
      "folder for the MCAP files (created if missing)"),
-    ("file_prefix", "", ParameterType.PARAMETER_STRING,
+    ("file_prefix", "",
      "file name prefix; files are <prefix>_000.mcap, ... (default rec_<date>_<time>)"),
-    ("max_file_size_mb", 0.0, ParameterType.PARAMETER_DOUBLE,
+    ("max_file_size_mb", 0.0,
      "start a new file past this size [MB = 1e6 bytes]; 0 = no size split"),
-    ("max_file_duration_s", 0.0, ParameterType.PARAMETER_DOUBLE,
+    ("max_file_duration_s", 0.0,
      "start a new file after this duration [s]; 0 = no time split"),
-    ("compression", "zstd", ParameterType.PARAMETER_STRING, "chunk compression: zstd, lz4, none"),
-    ("flush_period_s", 0.5, ParameterType.PARAMETER_DOUBLE,
+    ("compression", "zstd",
+     "chunk compression: zstd, lz4, none"),
+    ("flush_period_s", 0.5,
      "close the open chunk this often [s]: the most a SIGKILL can lose"),
-    ("discovery_period_s", 0.5, ParameterType.PARAMETER_DOUBLE,
+    ("discovery_period_s", 0.5,
      "how often to look for new topics and publishers [s]"),
-    ("history", "keep_all", ParameterType.PARAMETER_STRING,
+    ("history", "keep_all",
      "subscription history: keep_all (DDS buffers a backlog without loss while the "
      "recorder is busy) or keep_last (bounded by queue_depth; old messages dropped)"),
-    ("queue_depth", 1000, ParameterType.PARAMETER_INTEGER,
+    ("queue_depth", 1000,
      "subscription history depth per topic with history keep_last"),
-    ("retry_period_s", 5.0, ParameterType.PARAMETER_DOUBLE,
+    ("retry_period_s", 5.0,
      "after a write error (disk full), try a new file this often [s]"),
 ]
-
-
-class ConfigurationError(ValueError):
-    """A parameter value that makes recording impossible (fatal at start-up)."""
 
 
 def _qos_to_dict(qos) -> dict:
@@ -114,12 +106,11 @@ class _RawCallback:
 class RecorderNode(Node):
     """Records topics to MCAP; see the module docstring and ``ros2 param list /recorder``."""
 
+    NODE_NAME = "recorder"
+
     def __init__(self, **kwargs):
         super().__init__("recorder", **kwargs)
-        for name, default, ptype, desc in _PARAMS:
-            self.declare_parameter(name, default, ParameterDescriptor(
-                type=ptype, description=desc, read_only=True))
-        p = {name: self.get_parameter(name).value for name, *_ in _PARAMS}
+        p = declare_parameters(self, _PARAMS)
         self.topics = [t for t in (p["topics"] or []) if t]
         self._validate(p)
         self.include_hidden = p["include_hidden"]
@@ -289,32 +280,8 @@ class RecorderNode(Node):
                                f"dropped {rec.dropped_messages}")
 
 
-def _raise_keyboard_interrupt(signum, frame):
-    raise KeyboardInterrupt(f"signal {signum}")
-
-
 def main(args=None) -> int:
-    # Handle SIGINT/SIGTERM ourselves (not rclpy's handler, which invalidates the context
-    # first), so the node can still log while it finishes its files.
-    signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = RecorderNode()
-        rclpy.spin(node)
-    except (ConfigurationError, ParameterException) as exc:
-        print(f"[recorder] fatal configuration error: {exc}", file=sys.stderr)
-        return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.close()
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
+    return run_node(RecorderNode, args, close=RecorderNode.close)
 
 
 if __name__ == "__main__":

@@ -12,19 +12,14 @@ stopped (``~/stop``), when the goal is reached, when odometry is missing or olde
 from __future__ import annotations
 
 import math
-import signal
 import sys
 
-import rclpy
 from geometry_msgs.msg import Pose2D, PoseStamped
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
+from soft_robot_common import ConfigurationError, declare_parameters, run_node
 from std_srvs.srv import Trigger
 
 from frog_planner.core.library_file import LibraryFormatError
@@ -58,16 +53,6 @@ _PARAMS = [
 ]
 
 
-class ConfigurationError(ValueError):
-    """Parameters that make planning impossible (fatal at start-up)."""
-
-
-def _descriptor(value, description):
-    ptype = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
-             float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}[type(value)]
-    return ParameterDescriptor(type=ptype, description=description, read_only=True)
-
-
 def yaw_of(q) -> float:
     """Yaw [rad] of a geometry_msgs quaternion (rotation about z)."""
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
@@ -96,11 +81,11 @@ def build_path(p: dict):
 class PlannerNode(Node):
     """See the module docstring; parameters in ``_PARAMS``."""
 
+    NODE_NAME = "planner_node"
+
     def __init__(self, **kwargs):
         super().__init__("planner_node", **kwargs)
-        for name, default, desc in _PARAMS:
-            self.declare_parameter(name, default, _descriptor(default, desc))
-        p = {name: self.get_parameter(name).value for name, *_ in _PARAMS}
+        p = declare_parameters(self, _PARAMS)
         self.cfg = p
         self._validate(p)
         try:
@@ -275,29 +260,8 @@ class PlannerNode(Node):
         self._publish(8, "I")
 
 
-def _raise_keyboard_interrupt(signum, frame):
-    raise KeyboardInterrupt(f"signal {signum}")
-
-
 def main(args=None) -> int:
-    signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = PlannerNode()
-        rclpy.spin(node)
-    except (ConfigurationError, ParameterException) as exc:
-        print(f"[planner_node] fatal configuration error: {exc}", file=sys.stderr)
-        return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
+    return run_node(PlannerNode, args)
 
 
 if __name__ == "__main__":

@@ -13,22 +13,17 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import signal
 import sys
 import time
 
-import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
+from soft_robot_common import ConfigurationError, declare_parameters, run_node
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
@@ -63,16 +58,6 @@ _MODEL_FIELDS = [f for f in dataclasses.fields(FrogParameters)
                  if f.type in ("float", "int", "str", float, int, str)]
 
 
-def _descriptor(value, description):
-    ptype = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
-             float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}[type(value)]
-    return ParameterDescriptor(type=ptype, description=description, read_only=True)
-
-
-class ConfigurationError(ValueError):
-    """Parameters that make a simulation impossible (fatal at start-up)."""
-
-
 def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation by ``yaw`` about z."""
     return 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
@@ -81,19 +66,17 @@ def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
 class SimNode(Node):
     """Frog simulator node; parameters in ``_NODE_PARAMS`` and ``model.*``."""
 
+    NODE_NAME = "sim_node"
+
     def __init__(self, **kwargs):
         super().__init__("sim_node", **kwargs)
         defaults = FrogParameters()
-        for name, default, desc in _NODE_PARAMS:
-            self.declare_parameter(name, default, _descriptor(default, desc))
-        for f in _MODEL_FIELDS:
-            value = getattr(defaults, f.name)
-            self.declare_parameter(f"model.{f.name}", value,
-                                   _descriptor(value, f"FrogParameters.{f.name} (SI; see "
-                                                      f"frog_sim/core/model_parameters.py)"))
-        p = {name: self.get_parameter(name).value for name, *_ in _NODE_PARAMS}
+        p = declare_parameters(self, _NODE_PARAMS)
         self.cfg = p
-        model = {f.name: self.get_parameter(f"model.{f.name}").value for f in _MODEL_FIELDS}
+        model = declare_parameters(self, [
+            (f.name, getattr(defaults, f.name),
+             f"FrogParameters.{f.name} (SI; see frog_sim/core/model_parameters.py)")
+            for f in _MODEL_FIELDS], prefix="model.")
         self._validate(p)
         try:
             params = defaults.replace(**model)
@@ -297,29 +280,8 @@ class SimNode(Node):
         self.diag_pub.publish(msg)
 
 
-def _raise_keyboard_interrupt(signum, frame):
-    raise KeyboardInterrupt(f"signal {signum}")
-
-
 def main(args=None) -> int:
-    signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = SimNode()
-        rclpy.spin(node)
-    except (ConfigurationError, ParameterException) as exc:
-        print(f"[sim_node] fatal configuration error: {exc}", file=sys.stderr)
-        return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
+    return run_node(SimNode, args)
 
 
 if __name__ == "__main__":
