@@ -13,9 +13,12 @@ slots (gaps)          6 slots, 5 mm wide, y 5-25, starting at x = 15, 30, 45,
                       tip tooth x 95-120)
 knuckles              K0 = x 15-45, K1 = x 45-75, K2 = x 75-120 (two slots each)
 cable j               one per knuckle, anchored at the knuckle's distal end
-                      (x = 45, 75, 120), running at height y = 15, 20, 25 mm,
-                      crossing the 2, 4, 6 slots before its anchor; total length
-                      L_j = anchor x (the rest is the inside portion L_R of eq. 6)
+                      (x = 45, 75, 120); it runs inside the spine (near the neutral
+                      axis, no length change) through the proximal knuckles and
+                      crosses only its own knuckle's two slots at the top edge
+                      (y = 25 mm); total length L_j = anchor x (all but the two
+                      slot segments is the inside portion L_R of eq. 6). The three
+                      knuckles thus bend independently (a planar 3-joint finger).
 tip marker ('tip')    top-right corner (120, 25, 12.5), the tracked point q
 ====================  =========================================================
 
@@ -49,8 +52,8 @@ MM = 1e-3
 
 #: finger geometry (mm), see module docstring
 FINGER = dict(length=120.0, height=25.0, width=25.0, base=15.0, spine=5.0, slot_width=5.0,
-              slot_starts=(15.0, 30.0, 45.0, 60.0, 75.0, 90.0), anchors=(45.0, 75.0, 120.0),
-              cable_heights=(15.0, 20.0, 25.0))
+              slot_starts=(15.0, 30.0, 45.0, 60.0, 75.0, 90.0), knuckle_starts=(15.0, 45.0, 75.0),
+              anchors=(45.0, 75.0, 120.0), cable_heights=(25.0, 25.0, 25.0))
 
 #: Cable triangles weigh area x (this fraction of the z spacing) x 5.0 in eq. 9. A thin sheet
 #: keeps them about ten times stiffer than the spine they bend -- enough to meet eq. 6 within
@@ -108,11 +111,11 @@ def build_tendon_finger(resolution: int = DEFAULT_FINGER_RESOLUTION, shape_param
     groups = [ElementGroup('body', 'body', tets, shape_parameter=shape_parameter)]
     actuators = []
     js = int(round(f['spine'] / h))
-    for c, (anchor, yc_mm) in enumerate(zip(f['anchors'], f['cable_heights'])):
+    for c, (start, anchor, yc_mm) in enumerate(zip(f['knuckle_starts'], f['anchors'], f['cable_heights'])):
         jy = int(round(yc_mm / h))
         tris = []
         for s0 in f['slot_starts']:
-            if s0 >= anchor:
+            if not start <= s0 < anchor:
                 continue
             i0, i1 = int(round(s0 / h)), int(round((s0 + f['slot_width']) / h))
             for kz in range(nz + 1):
@@ -123,7 +126,7 @@ def build_tendon_finger(resolution: int = DEFAULT_FINGER_RESOLUTION, shape_param
         assert np.all(tris >= 0)
         name = f'cable_{c}'
         groups.append(ElementGroup(name, 'cable', tris, thickness=CABLE_SHEET_FRACTION * hz * MM))
-        n_slots = sum(1 for s0 in f['slot_starts'] if s0 < anchor)
+        n_slots = sum(1 for s0 in f['slot_starts'] if start <= s0 < anchor)
         gap = n_slots * f['slot_width']
         s_min = 1.0 - max_slot_closure * gap / anchor
         actuators.append(Actuator(name, name, total_length=anchor * MM, bounds=(s_min, 1.0),

@@ -13,13 +13,13 @@ and inside the workspace (Fig. 14).
 
 Built-in curves (the finger's bending plane z = 12.5 mm; metres at the API):
 
-* ``'L'`` (N = 55): from (100, 63) mm down to the corner (100, 56) mm, then to (106, 56) mm,
+* ``'L'`` (N = 55): from (98, 58) mm down to the corner (98, 51) mm, then to (104, 51) mm,
   sampled uniformly by arc length (an "L", Fig. 13).
-* ``'flame'`` (N = 85): a closed flame outline centred at (102, 58) mm, about 5 mm wide and
+* ``'flame'`` (N = 85): a closed flame outline centred at (101, 53) mm, about 6 mm wide and
   9 mm tall, with a pointed top, sampled uniformly in its parameter.
 
 The finger's three cables all run on its upper side, so its workspace is a curved band
-(about 6-10 mm wide) from the rest tip (120, 25) mm up to about (65, 85) mm; both curves lie in
+(about 10-15 mm wide) from the rest tip (120, 25) mm up to about (75, 75) mm; both curves lie in
 the band's middle section. Waypoints the finger cannot reach are reported with the nearest
 reachable point (see ``softkin trajectory`` output).
 """
@@ -40,7 +40,7 @@ FINGER_PLANE_Z = 12.5 * MM
 
 def curve_L(n: int = 55) -> np.ndarray:
     """The 'L' trajectory: (n, 3) points (m), uniform in arc length."""
-    corners = np.array([[100.0, 63.0], [100.0, 56.0], [106.0, 56.0]]) * MM
+    corners = np.array([[98.0, 58.0], [98.0, 51.0], [104.0, 51.0]]) * MM
     seg = np.linalg.norm(np.diff(corners, axis=0), axis=1)
     s = np.linspace(0.0, seg.sum(), n)
     cum = np.concatenate([[0.0], np.cumsum(seg)])
@@ -58,7 +58,7 @@ def curve_flame(n: int = 85) -> np.ndarray:
     # a teardrop: round bottom, pointed top (flame tip at t = pi / 2)
     w = 2.5 * np.cos(t) * (1 - 0.5 * (np.sin(t) > 0) * np.sin(t) ** 2)
     h = 4.0 * np.sin(t) - 0.7 * np.sin(3 * t)
-    pts = np.column_stack([102.0 + w, 58.0 + h]) * MM
+    pts = np.column_stack([101.0 + 1.2 * w, 53.0 + h]) * MM
     return np.column_stack([pts, np.full(n, FINGER_PLANE_Z)])
 
 
