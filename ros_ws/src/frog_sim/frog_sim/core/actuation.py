@@ -289,6 +289,20 @@ class ActuatorArrays:
     edge_index, edge_limb : ndarray of int, shape (Ea,)
     edge_area : ndarray, shape (Ea,)
         A [m^2] (EA = E(t) A).
+    root_index, root_limb : ndarray of int, shape (R,)
+        Root bends (body side edge -> first limb edge) and their limb.
+    root_sign : ndarray, shape (R,)
+    root_base_angle : ndarray, shape (R,)
+        Turning angle of the root bend for a straight limb [rad].
+    root_half_edge : ndarray, shape (R,)
+        Half of the first limb edge [m]: the root bend carries the limb curvature of
+        this half cell, so the whole limb length is curved (dl-consistent):
+        ``kappa0 = 2 tan((base + sign atan(kappa dl / 2)) / 2) / root_length``.
+    root_length : ndarray, shape (R,)
+        Voronoi length of the root bend [m].
+    root_second_moment : ndarray, shape (R,)
+        Effective I of the root bend [m^4] (EI = E(t) I): 2 I_limb, since only the limb
+        half of the root cell bends (the body half is rigid; springs in series).
     """
 
     limb_profile: np.ndarray
@@ -302,6 +316,23 @@ class ActuatorArrays:
     edge_index: np.ndarray
     edge_limb: np.ndarray
     edge_area: np.ndarray
+    root_index: np.ndarray = None
+    root_limb: np.ndarray = None
+    root_sign: np.ndarray = None
+    root_base_angle: np.ndarray = None
+    root_half_edge: np.ndarray = None
+    root_length: np.ndarray = None
+    root_second_moment: np.ndarray = None
+
+    def __post_init__(self):
+        if self.root_index is None:
+            self.root_index = np.zeros(0, dtype=np.int64)
+            self.root_limb = np.zeros(0, dtype=np.int64)
+            self.root_sign = np.zeros(0)
+            self.root_base_angle = np.zeros(0)
+            self.root_half_edge = np.zeros(0)
+            self.root_length = np.zeros(0)
+            self.root_second_moment = np.zeros(0)
 
     @classmethod
     def empty(cls) -> 'ActuatorArrays':
@@ -324,7 +355,9 @@ class ActuatorArrays:
         """Arguments of :func:`apply_actuation` after ``t``."""
         return (self.limb_profile, self.limb_young, self.activation_times, self.activation_offsets,
                 self.bend_index, self.bend_limb, self.bend_sign, self.bend_second_moment,
-                self.edge_index, self.edge_limb, self.edge_area)
+                self.edge_index, self.edge_limb, self.edge_area, self.root_index, self.root_limb,
+                self.root_sign, self.root_base_angle, self.root_half_edge, self.root_length,
+                self.root_second_moment)
 
 
 @njit(cache=True)
@@ -352,7 +385,8 @@ def profile_value(row, tau):
 @njit(cache=True)
 def apply_actuation(t, limb_profile, limb_young, activation_times, activation_offsets,
                     bend_index, bend_limb, bend_sign, bend_second_moment, edge_index, edge_limb,
-                    edge_area, kappa0, ei, ea):
+                    edge_area, root_index, root_limb, root_sign, root_base_angle, root_half_edge,
+                    root_length, root_second_moment, kappa0, ei, ea):
     """Write the natural curvature and stiffness of actuated elements at time ``t`` [s]."""
     n_limbs = limb_profile.shape[0]
     kap = np.empty(n_limbs)
@@ -374,3 +408,7 @@ def apply_actuation(t, limb_profile, limb_young, activation_times, activation_of
         ei[bend_index[m]] = young[limb] * bend_second_moment[m]
     for m in range(edge_index.shape[0]):
         ea[edge_index[m]] = young[edge_limb[m]] * edge_area[m]
+    for m in range(root_index.shape[0]):
+        half = np.arctan(0.5 * kap[root_limb[m]] * 2.0 * root_half_edge[m])
+        kappa0[root_index[m]] = 2.0 * np.tan(0.5 * (root_base_angle[m] + root_sign[m] * half)) / root_length[m]
+        ei[root_index[m]] = young[root_limb[m]] * root_second_moment[m]

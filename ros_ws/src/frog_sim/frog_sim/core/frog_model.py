@@ -11,7 +11,10 @@ Layout (robot frame ``frog``: x forward, y left, origin at the body centre):
   ``-limb_root_angle_deg`` (default -75 deg: pointing aft, 15 deg outward of the body
   axis, like frog legs). Fig. 2b does not give this angle; it was calibrated against
   the 10 % EGaIn speed runs (see ``model_parameters``), as the paper did with C_bn.
-  The root bend uses the body stiffness (the limb is strapped to the body); the
+  The root bend (body side edge -> first limb edge) is the clamp of the limb: only
+  its limb half cell bends, so its stiffness is 2 E(t) I (rigid body half in series),
+  and it carries the limb curvature of that half cell, so that the whole limb length
+  is curved (the polygon is inscribed in an arc tangent to the root direction). The
   limb's interior bends are actuated: natural curvature ``sign * kappa(t)`` (eq. 9),
   stiffness ``E(t) I``. Relaxed aft-pointing limbs curl toward the body axis
   (``limb_curl_direction = 'backward'``); the fast unrolling kick drives the robot
@@ -62,6 +65,10 @@ class FrogModel:
         Limb name -> +1/-1 (kappa0 = sign * kappa(t)).
     reference_pose : ndarray, shape (N, 2)
         Unactuated pose with its centre of mass at the origin [m] (eq. 11).
+    root_bends : dict
+        Limb name -> index of its root bend (body side edge -> first limb edge).
+    root_base_angle : dict
+        Limb name -> turning angle of the root bend for a straight limb [rad].
     """
 
     params: FrogParameters
@@ -73,6 +80,8 @@ class FrogModel:
     limb_edges: dict
     limb_sign: dict
     reference_pose: np.ndarray
+    root_bends: dict = None
+    root_base_angle: dict = None
 
     @property
     def n_nodes(self) -> int:
@@ -115,14 +124,22 @@ class FrogModel:
             bend_second_moment=np.full(len(bend_index), p.limb_second_moment),
             edge_index=np.array(edge_index, dtype=np.int64),
             edge_limb=np.array(edge_limb, dtype=np.int64),
-            edge_area=np.full(len(edge_index), p.limb_area))
+            edge_area=np.full(len(edge_index), p.limb_area),
+            root_index=np.array([self.root_bends[l] for l in LIMB_NAMES], dtype=np.int64),
+            root_limb=np.array([LIMB_IDS[l] for l in LIMB_NAMES], dtype=np.int64),
+            root_sign=np.array([self.limb_sign[l] for l in LIMB_NAMES], dtype=float),
+            root_base_angle=np.array([self.root_base_angle[l] for l in LIMB_NAMES]),
+            root_half_edge=np.full(len(LIMB_NAMES), 0.5 * p.edge_length),
+            root_length=self.network.bend_length[[self.root_bends[l] for l in LIMB_NAMES]],
+            root_second_moment=np.full(len(LIMB_NAMES), 2.0 * p.limb_second_moment))
         return arr
 
 
 def _limb_points(root, direction, n_edges, dl, turning):
-    """Nodes of a discrete arc: first edge along ``direction``, then constant turning angle."""
+    """Nodes of a discrete arc tangent to ``direction`` at ``root``: chord k points along
+    the direction turned by (k + 1/2) ``turning`` (the polygon inscribed in the arc)."""
     pts = []
-    ang = np.arctan2(direction[1], direction[0])
+    ang = np.arctan2(direction[1], direction[0]) + 0.5 * turning
     p = np.asarray(root, dtype=float)
     for k in range(n_edges):
         if k > 0:
@@ -186,7 +203,7 @@ def build_frog_model(params: FrogParameters | None = None, relaxed_curvature: fl
     limb_kw = dict(stretching_stiffness=p.limb_young_relaxed * p.limb_area,
                    linear_density=p.limb_density * p.limb_area, diameter=2 * p.limb_radius,
                    drag_normal=p.limb_drag_normal, drag_tangent=p.limb_drag_tangent)
-    limb_nodes, limb_sign, bend_ranges, edge_ranges = {}, {}, {}, {}
+    limb_nodes, limb_sign, bend_ranges, edge_ranges, root_bends, root_base = {}, {}, {}, {}, {}, {}
     for limb in LIMB_NAMES:
         corner = corner_of[limb]
         side_nb, direction, sign = layout[limb]
@@ -205,8 +222,11 @@ def build_frog_model(params: FrogParameters | None = None, relaxed_curvature: fl
         edge_ranges[limb] = np.arange(e0, len(builder._edges))
         bend_ranges[limb] = np.arange(b0, len(builder._bends))
         # root bend: body side edge -> first limb edge (passive, strapped to the body)
-        builder.add_bend(side_nb, corner, ids[0], bending_stiffness=p.body_bending_stiffness,
+        builder.add_bend(side_nb, corner, ids[0],
+                         bending_stiffness=2.0 * p.limb_young_relaxed * p.limb_second_moment,
                          group=BODY_GROUP)
+        root_bends[limb] = len(builder._bends) - 1
+        root_base[limb] = _turning(ring[side_nb], ring[corner], np.asarray(ring[corner]) + direction)
         limb_nodes[limb] = ids
         limb_sign[limb] = sign
     network = builder.build()
@@ -215,4 +235,12 @@ def build_frog_model(params: FrogParameters | None = None, relaxed_curvature: fl
     assert n_ring == 4 * n
     return FrogModel(params=p, network=network, mass=mass, corner_nodes=corner_of,
                      limb_nodes=limb_nodes, limb_bends=bend_ranges, limb_edges=edge_ranges,
-                     limb_sign=limb_sign, reference_pose=pose)
+                     limb_sign=limb_sign, reference_pose=pose, root_bends=root_bends,
+                     root_base_angle=root_base)
+
+
+def _turning(a, b, c) -> float:
+    """Signed turning angle at b of the polyline a -> b -> c [rad]."""
+    e1 = np.asarray(b) - np.asarray(a)
+    e2 = np.asarray(c) - np.asarray(b)
+    return float(np.arctan2(e1[0] * e2[1] - e1[1] * e2[0], e1 @ e2))

@@ -211,8 +211,9 @@ def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len,
 def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei, kappa0, cn, ct,
                f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, force_tol, pos_tol,
                max_iter, act_profile, act_young, act_times, act_offsets, act_bend, act_bend_limb,
-               act_bend_sign, act_bend_i, act_edge, act_edge_limb, act_edge_area,
-               lu, rhs, resid, x_prev, v_prev, lu_state, reuse, v_old, packed, refresh_ratio=0.5):
+               act_bend_sign, act_bend_i, act_edge, act_edge_limb, act_edge_area, act_root,
+               act_root_limb, act_root_sign, act_root_base, act_root_half, act_root_len,
+               act_root_i, lu, rhs, resid, x_prev, v_prev, lu_state, reuse, v_old, packed, refresh_ratio=0.5):
     """Advance ``n_steps`` steps of size ``h`` in place (x, v), actuation included.
 
     The Newton guess extrapolates the velocity linearly, ``x_k + h (2 v_k - v_{k-1})``
@@ -228,7 +229,8 @@ def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
         t_new = t + (k + 1) * h
         apply_actuation(t_new, act_profile, act_young, act_times, act_offsets, act_bend,
                         act_bend_limb, act_bend_sign, act_bend_i, act_edge, act_edge_limb,
-                        act_edge_area, kappa0, ei, ea)
+                        act_edge_area, act_root, act_root_limb, act_root_sign, act_root_base,
+                        act_root_half, act_root_len, act_root_i, kappa0, ei, ea)
         for d in range(n):
             x_prev[d] = x[d]
             v_prev[d] = v[d]

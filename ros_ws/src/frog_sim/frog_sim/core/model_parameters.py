@@ -187,7 +187,7 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     'added_mass_coefficient': ('-', 'paper: C_a = 1 (theoretical)'),
     'limb_root_angle_deg': ('deg', 'calibrated (Fig. 2b gives no angle): limb root direction turned '
                             'from lateral (0) toward the rear (-90 = pointing aft); sweep '
-                            '-90/-75/-60/-45 deg gave speed RMS 9.5/8.2/8.6/10.8 mm/s vs the 10 % '
+                            '-90/-75/-60/-45 deg gave speed RMS 5.7/4.3/4.6/5.9 mm/s vs the 10 % '
                             'calibration runs -> limbs point aft, 15 deg outward, like frog legs'),
     'pulse_duration': ('s', 'DESIGN.md hardware pulse 80 ms (paper characterisation 70 ms)'),
     'primitive_period': ('s', 'DESIGN.md: one primitive per 1.5 s'),
