@@ -208,3 +208,18 @@ def test_numpy_reference_step_matches_numba_step():
     scale = np.abs(integ.v).max()
     assert np.abs(ref.v - integ.v).max() < 1e-6 * scale
     assert np.abs(ref.x - integ.x).max() < 1e-9
+
+
+def test_failed_step_raises_clear_error_and_keeps_state():
+    """A step that cannot converge even after halving raises ConvergenceError (no NaN state)."""
+    from frog_sim.core.integrator import ConvergenceError
+    net = straight_rod(10, 0.035, stretching_stiffness=EA, bending_stiffness=EI)
+    integ = ImplicitEulerIntegrator(net, lumped_masses(net, 1000.0, 1.0), max_iterations=1,
+                                    max_halvings=2, force_tolerance=1e-15)
+    integ.kappa0[:] = 150.0                   # far from equilibrium: needs many iterations
+    x_before = integ.x.copy()
+    with pytest.raises(ConvergenceError, match=r't = 0 s with h = .* after 2 halvings'):
+        integ.step(1e-3)
+    assert np.array_equal(integ.x, x_before) and integ.time == 0.0
+    with pytest.raises(ValueError, match='time step h'):
+        integ.step(float('nan'))

@@ -495,7 +495,8 @@ class ImplicitEulerIntegrator:
         ValueError
             If ``h`` is not a positive finite number.
         ConvergenceError
-            If the step cannot be completed after ``max_halvings`` halvings.
+            If the step cannot be completed after ``max_halvings`` halvings; the state is
+            then the last converged (sub-)step, never a partial Newton iterate.
         """
         if not (np.isfinite(h) and h > 0):
             raise ValueError(f'time step h = {h!r} must be a positive finite number of seconds')
