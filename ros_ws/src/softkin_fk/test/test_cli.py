@@ -1,0 +1,30 @@
+"""The ``softkin`` command line: JSON + PNG output, clear errors with a non-zero exit."""
+import json
+
+import numpy as np
+
+from softkin_fk.cli import main
+
+
+def test_fk_writes_json_and_png(tmp_path, capsys):
+    out = tmp_path / 'fk'
+    rc = main(['fk', '--resolution', '1', '--pull-mm', '1', '1', '2', '--out', str(out), '--quiet'])
+    assert rc == 0
+    data = json.loads((out / 'result.json').read_text())
+    assert data['converged'] and data['units'] == 'm'
+    tip = np.array(data['markers']['tip'])
+    assert tip[1] > 0.025  # bent towards the cables (+y)
+    assert (out / 'deformed.png').stat().st_size > 1000
+    assert json.loads(capsys.readouterr().out)['converged']
+
+
+def test_bad_input_gives_error_and_exit_2(tmp_path, capsys):
+    rc = main(['fk', '--resolution', '1', '--actuation', '0.5', '1', '1', '--out', str(tmp_path)])
+    err = capsys.readouterr().err
+    assert rc == 2 and 'outside its bounds' in err and '0.5' in err
+    rc = main(['fk', '--resolution', '1', '--pull-mm', '1', '--out', str(tmp_path)])
+    assert rc == 2 and 'needs 3 values' in capsys.readouterr().err
+    rc = main(['trajectory', '--resolution', '1', '--csv', str(tmp_path / 'nope.csv'), '--out', str(tmp_path)])
+    assert rc == 2 and 'not found' in capsys.readouterr().err
+    rc = main(['calibrate', '--ratios', '0.7', '--out', str(tmp_path)])
+    assert rc == 2 and 'must exceed 1' in capsys.readouterr().err
