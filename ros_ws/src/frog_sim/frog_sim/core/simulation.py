@@ -22,13 +22,14 @@ from .model_parameters import FrogParameters
 from .rigid_body import HeadingUnwrapper, RigidBodyState, nodal_velocities, rigid_body_state
 from .schedules import LIMB_NAMES, ActivationSchedule
 
-#: Default time step [s], chosen from the dt convergence study (``frog-sim convergence``,
-#: 10 cycles at 1 Hz, 10 % EGaIn): the 10-cycle displacement is 338.8 / 348.2 / 351.3 /
-#: 351.3 / 349.2 mm at dt = 8 / 4 / 2 / 1 / 0.5 ms (first-order changes 9.4, 3.1, 0.03 mm
-#: down to 1 ms). Below 1 ms it drifts by ~0.6-0.9 % per halving (346.2, 343.5, 341.5 mm
-#: at 0.25, 0.125, 0.0625 ms) as backward Euler stops damping the limb's higher bending
-#: modes (60 Hz-1.5 kHz), which the model has no material damping for. 2 ms stays within
-#: 2 % of 1 ms also for 30 % EGaIn at 1.3 Hz and 50 % at 2 Hz, where 4 ms is 4-5 % off.
+#: Default time step [s], chosen from the dt convergence study (``frog-sim convergence``
+#: plus finer steps; 10 cycles at 1 Hz, 10 % EGaIn): the 10-cycle displacement is
+#: 398.1 / 406.3 / 408.0 / 406.9 / 404.2 / 401.3 / 399.3 / 398.2 mm at dt = 8 / 4 / 2 / 1 /
+#: 0.5 / 0.25 / 0.125 / 0.0625 ms. Below 0.5 ms the changes shrink (2.9, 2.0, 1.1 mm) toward
+#: ~397 mm; above, the error is not yet asymptotic because backward Euler damps the limb's
+#: bending modes (60 Hz - 1.5 kHz, no material damping in the model) more or less with dt.
+#: 2 ms is within 3 % of the dt -> 0 estimate and within 0.1 % / 2.4 % of 1 ms for 30 %
+#: EGaIn at 1.3 Hz / 50 % at 2 Hz (4 ms: 2.3 % / 5.2 %), at ~1/4 of the 1 ms cost.
 DEFAULT_TIME_STEP = 2.0e-3
 #: Default Newton force tolerance [N]: ~0.1 % of the nodal drag/inertia forces of a limb
 #: during a kick (~1e-3 N). Tightening it to 1e-8 N changes the 10-cycle displacement at
