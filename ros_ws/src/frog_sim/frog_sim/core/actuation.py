@@ -199,7 +199,9 @@ class ActuationLibrary:
         cache_file = cache_dir() / f'actuation_fit_v{FIT_VERSION}_{digest[:12]}.json'
         if use_cache and cache_file.is_file():
             try:
-                return cls._from_json(json.loads(cache_file.read_text()))
+                lib = cls._from_json(json.loads(cache_file.read_text()))
+                lib.source['cache_file'] = str(cache_file)
+                return lib
             except (ValueError, KeyError):
                 pass  # corrupt cache: refit
         data = read_curvature_profiles(path)

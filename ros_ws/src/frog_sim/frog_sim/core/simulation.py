@@ -412,7 +412,6 @@ class FrogSimulation:
 
     def metadata(self) -> dict:
         """Parameters, profile, time step and code version (for output files)."""
-        from .. import __name__ as pkg  # noqa: F401
         try:
             from importlib.metadata import version
             code_version = version('frog_sim')
