@@ -362,7 +362,7 @@ class ActuatorArrays:
                 self.root_second_moment)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _logistic_scalar(t, c1, c2, c3, c4):
     z = -c2 * (t - c3)
     if z > 700.0:
@@ -372,7 +372,7 @@ def _logistic_scalar(t, c1, c2, c3, c4):
     return c1 / (1.0 + np.exp(z)) + c4
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def profile_value(row, tau):
     """eq. 9 for one numba profile row at time ``tau`` since firing (< 0: never fired)."""
     if tau < 0.0:
@@ -384,7 +384,7 @@ def profile_value(row, tau):
     return _logistic_scalar(tau, row[4], row[5], row[6], row[7])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def apply_actuation(t, limb_profile, limb_young, activation_times, activation_offsets,
                     bend_index, bend_limb, bend_sign, bend_second_moment, edge_index, edge_limb,
                     edge_area, root_index, root_limb, root_sign, root_base_angle, root_half_edge,

@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model='numpy')
 def stretch_element(xa0, xa1, xb0, xb1, rest_length, ea, grad, hess, want_hess=True):
     """Energy of one edge; writes gradient (4,) and (if ``want_hess``) Hessian (4, 4)
     w.r.t. (xa, ya, xb, yb). (fastmath: no NaN checks in here; callers check results.)"""
@@ -65,7 +65,7 @@ def _d2c(p, q):
     return 0.0
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model='numpy')
 def bend_element(xa0, xa1, xb0, xb1, xc0, xc1, dl, ei, kappa0, grad, hess, work, want_hess=True):
     """Energy of one bending triple; writes gradient (6,) and (if ``want_hess``) Hessian (6, 6).
 
@@ -163,7 +163,7 @@ def bend_element(xa0, xa1, xb0, xb1, xc0, xc1, dl, ei, kappa0, grad, hess, work,
     return energy
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def elastic_energy_gradient(x, edges, rest_length, ea, bends, bend_length, ei, kappa0, grad_out):
     """Total elastic energy [J]; accumulates the gradient (2N,) [N] into ``grad_out``."""
     for k in range(grad_out.shape[0]):
@@ -198,7 +198,7 @@ def elastic_energy_gradient(x, edges, rest_length, ea, bends, bend_length, ei, k
     return energy
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def elastic_hessian_dense(x, edges, rest_length, ea, bends, bend_length, ei, kappa0, hess_out):
     """Dense Hessian (2N, 2N) of the elastic energy [N/m] (tests and small problems)."""
     hess_out[:, :] = 0.0

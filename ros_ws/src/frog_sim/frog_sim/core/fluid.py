@@ -67,7 +67,7 @@ def lumped_masses(network, fluid_density: float, added_mass_coefficient: float) 
     return mass
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model='numpy')
 def drag_element(xa0, xa1, xb0, xb1, va0, va1, vb0, vb1, cn, ct, force, dfdv, dfdx,
                  want_jacobian=True):
     """Drag on one edge, lumped to its nodes.
@@ -132,7 +132,7 @@ def drag_element(xa0, xa1, xb0, xb1, va0, va1, vb0, vb1, cn, ct, force, dfdv, df
                 dfdx[o + p, 2 + q] = -dfdx[o + p, q]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def drag_forces(x, v, edges, cn, ct, force_out):
     """Total drag force (2N,) [N] on all nodes (no derivatives)."""
     for k in range(force_out.shape[0]):

@@ -45,7 +45,7 @@ class ConvergenceError(RuntimeError):
     """A time step failed even after the allowed number of step halvings."""
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0,
                     cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, dynamic, data, resid,
                     want_jac=True):
@@ -133,7 +133,7 @@ def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_le
     return norm
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0,
                   cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, dynamic,
                   force_tol, pos_tol, max_iter, lu, rhs, resid, lu_state, reuse, packed,
@@ -207,7 +207,7 @@ def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len,
     return STATUS_MAX_ITER, max_iter, norm
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei, kappa0, cn, ct,
                f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, force_tol, pos_tol,
                max_iter, act_profile, act_young, act_times, act_offsets, act_bend, act_bend_limb,

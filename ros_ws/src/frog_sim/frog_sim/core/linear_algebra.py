@@ -235,7 +235,7 @@ def build_sparse_lu_plan(n: int, rows: np.ndarray, cols: np.ndarray, perm: np.nd
                         index_of=index_of)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def sparse_lu_factor(lu, diag, low_ptr, low_idx, up_ptr, up_idx, op_ptr, op_target, pivot_tolerance):
     """Numeric LU in place on the plan's storage (no pivoting); 0 or 2 on a tiny pivot.
 
@@ -269,7 +269,7 @@ def sparse_lu_factor(lu, diag, low_ptr, low_idx, up_ptr, up_idx, op_ptr, op_targ
     return 0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def sparse_lu_pack(lu, diag, low_idx, up_idx, packed):
     """Copy the factors into ``packed`` = [L entries, U entries, 1/diag] in loop order
     (one indirection less in each of the several substitutions per factorisation)."""
@@ -283,7 +283,7 @@ def sparse_lu_pack(lu, diag, low_idx, up_idx, packed):
         packed[n_low + n_up + k] = 1.0 / lu[diag[k]]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def sparse_lu_substitute(packed, rhs, low_ptr, low_row, up_ptr, up_col):
     """Forward/backward substitution with packed factors; ``rhs`` (elimination order) in place."""
     n = low_ptr.shape[0] - 1
