@@ -148,7 +148,13 @@ def plot_trajectory(traj, path: Path, title: str, snapshots: int = 6, network=No
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(8, 5), dpi=120)
-    idx = np.unique(np.linspace(0, len(traj.time) - 1, max(snapshots, 2)).astype(int))
+    n_snap = max(snapshots, 2)
+    times = np.linspace(traj.time[0], traj.time[-1], n_snap)
+    gait = traj.metadata.get('gait')
+    if gait:   # spread the snapshots over the stroke phase too (limbs at different states)
+        period = 1.0 / gait['frequency_hz']
+        times = np.minimum(times + (np.arange(n_snap) % 4) * 0.06 * period, traj.time[-1])
+    idx = np.unique(np.searchsorted(traj.time, times).clip(0, len(traj.time) - 1))
     cmap = plt.get_cmap('viridis')
     for k, i in enumerate(idx):
         pos = traj.positions[i] * 1e3
