@@ -348,7 +348,7 @@ def _element_target(i, x, elements, rest_centred, kind, ratios, passive, shape_p
     energy[i] = coef[i] * e
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(parallel=True)  # not cached: numba cannot cache this parallel kernel
 def _local_targets_parallel(x, elements, rest_centred, kind, ratios, passive, shape_parameter,
                             rest_volume, coef, targets, energy):
     n, k = elements.shape

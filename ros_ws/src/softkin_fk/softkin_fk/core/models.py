@@ -65,8 +65,16 @@ CABLE_SHEET_FRACTION = 0.003
 DEFAULT_FINGER_RESOLUTION = 2
 
 
+#: a single-cable bender for the 240-degree benchmark: 240 x 25 x 25 mm, 22 slots of 5 mm
+#: at a 10 mm pitch from x = 15 mm, one cable along the top edge anchored at the tip
+BENDER = dict(length=240.0, height=25.0, width=25.0, base=15.0, spine=5.0, slot_width=5.0,
+              slot_starts=tuple(15.0 + 10.0 * i for i in range(22)), knuckle_starts=(15.0,),
+              anchors=(240.0,), cable_heights=(25.0,))
+
+
 def build_tendon_finger(resolution: int = DEFAULT_FINGER_RESOLUTION, shape_parameter: float = 1.0,
-                        max_slot_closure: float = 0.85) -> SoftMesh:
+                        max_slot_closure: float = 0.85, geometry: dict = None,
+                        width_cells: int = None) -> SoftMesh:
     """The 3-tendon finger of Fig. 12 as a tetrahedral mesh with three cable actuators.
 
     Parameters
@@ -78,6 +86,10 @@ def build_tendon_finger(resolution: int = DEFAULT_FINGER_RESOLUTION, shape_param
     max_slot_closure : float
         Fraction of a cable's slot length it may take up at most; sets the lower bound of each
         cable's shortening ratio s_j = 1 - max_slot_closure * sum(l_i) / L_j.
+    geometry : dict, optional
+        Dimensions (mm) in the form of :data:`FINGER` (default) or :data:`BENDER`.
+    width_cells : int, optional
+        Cells across the width (even; default 2 ceil(resolution / 2)).
 
     Returns
     -------
@@ -93,10 +105,12 @@ def build_tendon_finger(resolution: int = DEFAULT_FINGER_RESOLUTION, shape_param
     if int(resolution) != resolution or resolution < 1:
         raise ValueError(f"resolution {resolution!r} must be a positive integer (cells per 5 mm)")
     r = int(resolution)
-    f = FINGER
+    f = FINGER if geometry is None else geometry
     h = 5.0 / r
     nx, ny = int(round(f['length'] / h)), int(round(f['height'] / h))
-    nz = 2 * math.ceil(r / 2)
+    nz = 2 * math.ceil(r / 2) if width_cells is None else int(width_cells)
+    if nz < 2 or nz % 2:
+        raise ValueError(f"width_cells {width_cells} must be an even number >= 2")
     hz = f['width'] / nz
     xc = (np.arange(nx) + 0.5) * h
     yc = (np.arange(ny) + 0.5) * h
@@ -154,7 +168,8 @@ def finger_ratios_from_pull(mesh: SoftMesh, pull) -> np.ndarray:
 
 def build_pneumatic_actuator(resolution: float = 1.0, scale: float = 1.0, n_chambers: int = 3,
                              shape_parameter: float = 1.0, length_mm: float = 136.0,
-                             max_ratio: float = 4.0) -> SoftMesh:
+                             max_ratio: float = 4.0, side_mm: float = 48.0, chamber_radius_mm: float = 8.0,
+                             chamber_offset_mm: float = 14.0) -> SoftMesh:
     """A multi-chamber pneumatic actuator (Fig. 15 style), tetrahedral.
 
     Parameters
@@ -172,6 +187,8 @@ def build_pneumatic_actuator(resolution: float = 1.0, scale: float = 1.0, n_cham
         Length along x (mm, before scaling).
     max_ratio : float
         Upper bound of each chamber's volume ratio alpha.
+    side_mm, chamber_radius_mm, chamber_offset_mm : float
+        Square cross-section side, chamber radius and chamber distance from the axis (mm).
 
     Returns
     -------
@@ -184,7 +201,7 @@ def build_pneumatic_actuator(resolution: float = 1.0, scale: float = 1.0, n_cham
     if not 1 <= n_chambers <= 3:
         raise ValueError(f"n_chambers {n_chambers} must be 1, 2 or 3")
     h = 8.0 / resolution
-    side, radius, offset, cap = 48.0, 8.0, 14.0, 8.0
+    side, radius, offset, cap = side_mm, chamber_radius_mm, chamber_offset_mm, 8.0
     nx, ny = int(round(length_mm / h)), int(round(side / h))
     xc = (np.arange(nx) + 0.5) * h
     yc = (np.arange(ny) + 0.5) * h - ny * h / 2  # dimensions snap to the grid
