@@ -36,6 +36,9 @@ pneumatic tetrahedra, one actuator per chamber.
 layer; the middle 40 mm is the DEA membrane (actuation prisms), 10 mm frames (legs) at both
 ends are stiff body prisms; the rear frame is fixed.
 
+``BENDER`` geometry for ``build_tendon_finger`` -- a 240 x 25 x 25 mm single-cable actuator
+with 22 slots (5 mm wide, 10 mm pitch) used by the 240-degree bending benchmark.
+
 ``build_two_material_bar`` -- the calibration specimen of Fig. 7: a 100 x 10 x 10 mm bar,
 material A from x = 0 to L1, material B beyond; x = 0 fixed, the free end is a handle.
 """
@@ -61,7 +64,10 @@ FINGER = dict(length=120.0, height=25.0, width=25.0, base=15.0, spine=5.0, slot_
 #: equations well conditioned (full-thickness sheets slow the solver down by >10x).
 CABLE_SHEET_FRACTION = 0.003
 
-#: default finger resolution, chosen by the mesh-convergence study (see README of bench/)
+#: default finger resolution, chosen by the mesh-convergence study (``softkin convergence``,
+#: pulls 3/3/3 mm): the tip moves 1.50 mm from resolution 1 (1152 tets) to the finest mesh
+#: (resolution 4, 36864 tets), 0.09 mm at resolution 2 (4608 tets) and 0.11 mm at 3 -- below
+#: the IK threshold of 0.2 mm -- while an iteration costs 4x less than at resolution 3.
 DEFAULT_FINGER_RESOLUTION = 2
 
 
