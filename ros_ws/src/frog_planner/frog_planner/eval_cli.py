@@ -30,7 +30,8 @@ def _run(args, path_name, depth, metric, model_cache):
     res = run_closed_loop(path, model_cache[key], depth=depth, period=args.period,
                           weights=CostWeights(args.w_a, args.w_b, args.w_c),
                           start_offset=(0.0, args.lateral_offset, 0.0), max_time=args.max_time,
-                          heading_lookahead=args.heading_lookahead)
+                          heading_lookahead=args.heading_lookahead,
+                          velocity_lookahead=args.velocity_lookahead, yaw_rate_weight=args.w_r)
     files = save_result(res, args.out)
     m = res.metrics
     print(f"{path_name:8s} depth {depth} {metric:9s}: goal {'yes' if m['goal_reached'] else 'NO '} "
@@ -54,6 +55,11 @@ def main(argv=None) -> int:
     ap.add_argument("--w-c", type=float, default=300.0)
     ap.add_argument("--heading-lookahead", type=float, default=0.0,
                     help="heading error against the path this far ahead [m] (0 = paper's tangent)")
+    ap.add_argument("--velocity-lookahead", type=float, default=0.0,
+                    help="cost each leaf extrapolated by its predicted velocities over this time [s] "
+                         "(0 = paper: cost at the predicted pose)")
+    ap.add_argument("--w-r", type=float, default=0.0,
+                    help="weight per rad/s of |yaw rate - path curvature x speed| at the leaf (0 = paper)")
     ap.add_argument("--lateral-offset", type=float, default=0.0, help="start offset left of the path [m]")
     ap.add_argument("--max-time", type=float, default=None, help="give up after [s]")
     ap.add_argument("--compare", action="store_true", help="depths 1-3 x both metrics on every path")

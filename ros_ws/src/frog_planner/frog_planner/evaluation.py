@@ -42,6 +42,8 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
                     max_time: Optional[float] = None, start_offset=(0.0, 0.0, 0.0),
                     sim_params: Optional[dict] = None, sample_interval: float = 0.05,
                     heading_lookahead: float = 0.0,
+                    velocity_lookahead: float = 0.0,
+                    yaw_rate_weight: float = 0.0,
                     simulation=None) -> ClosedLoopResult:
     """Follow ``path`` with the simulated frog until the goal or ``max_time``.
 
@@ -65,6 +67,11 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
         FrogParameters overrides for the simulator.
     heading_lookahead : float
         Heading error against the path this far ahead [m] (0 = the paper's tangent).
+    velocity_lookahead : float
+        Cost the leaves extrapolated by their predicted velocities over this time [s]
+        (0 = the paper: cost at the predicted leaf pose).
+    yaw_rate_weight : float
+        w_r per rad/s of |predicted yaw rate - path curvature * forward speed| (0 = the paper).
     simulation : FrogSimulation, optional
         Reuse a simulator (it is reset).
 
@@ -81,7 +88,8 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     c, s = np.cos(h0), np.sin(h0)
     x0 = path.points[0] + start_offset[0] * np.array([c, s]) + start_offset[1] * np.array([-s, c])
     sim.set_pose(float(x0[0]), float(x0[1]), h0 + start_offset[2])
-    planner = Planner(model, path, weights, depth, heading_lookahead=heading_lookahead)
+    planner = Planner(model, path, weights, depth, heading_lookahead=heading_lookahead,
+                      velocity_lookahead=velocity_lookahead, yaw_rate_weight=yaw_rate_weight)
     max_time = max_time or path.length / 0.005
     stride = int(round(sample_interval / sim.time_step))
     steps_per_period = int(round(period / sim.time_step))
@@ -103,7 +111,8 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
                            [st.body_velocity[0], st.body_velocity[1], st.yaw_rate])
         decide_s.append(time.perf_counter() - t0)
         decisions.append({"time": sim.time, "primitive": d.name, "primitive_id": d.primitive_id,
-                          "total_cost": d.total_cost, "progress": d.progress,
+                          "total_cost": d.total_cost, "yaw_rate_cost": d.yaw_rate_cost,
+                          "progress": d.progress,
                           "distance_to_path": d.distance_to_path,
                           "current_cost": d.current_cost,
                           "current_terms": [d.current_cost_terms.distance, d.current_cost_terms.heading,
@@ -130,6 +139,8 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     metrics = {
         "path": path.name, "path_length_m": path.length, "depth": depth, "period_s": period,
         "metric": model.metric, "k_neighbours": model.k, "heading_lookahead_m": heading_lookahead,
+        "velocity_lookahead_s": velocity_lookahead, "yaw_rate_weight": yaw_rate_weight,
+        "weights": [weights.distance, weights.heading, weights.progress],
         "goal_reached": goal_time is not None,
         "completion_time_s": goal_time,
         "final_progress": progress,

@@ -131,10 +131,22 @@ def test_goal_reached():
     assert closed.goal_reached([0.0, 0.0])    # without progress the position alone decides
     assert not closed.goal_reached([0.0, 0.0], progress=0.0)
     assert closed.goal_reached([0.0, 0.0], progress=0.99)
-    # Past the finish line (x >= 0.4) with progress 1 counts however far to the side.
-    assert path.goal_reached([0.41, 0.08], progress=1.0)
-    assert not path.goal_reached([0.41, 0.08], progress=0.98)
+    # Past the finish line (x >= 0.4) with progress 1 counts only within the lateral
+    # tolerance (default: goal_tolerance, 3 cm) of the end: 2.5 cm to the side yes, 8 cm no.
+    assert path.goal_reached([0.45, 0.025], progress=1.0)
+    assert path.goal_reached([0.45, -0.025], progress=1.0)
+    assert not path.goal_reached([0.41, 0.08], progress=1.0)
+    assert not path.goal_reached([0.41, -0.08], progress=1.0)
+    assert not path.goal_reached([0.45, 0.025], progress=0.98)
     assert not path.goal_reached([0.39, 0.08], progress=1.0)
+    wide = line_path(length=0.4, goal_lateral_tolerance=0.1)
+    assert wide.goal_reached([0.41, 0.08], progress=1.0)
+    # The finish line of a path ending upwards (+y) is horizontal; lateral is along x.
+    up = line_path(length=0.4, heading=np.pi / 2)
+    assert up.goal_reached([0.02, 0.45], progress=1.0)
+    assert not up.goal_reached([0.05, 0.45], progress=1.0)
+    with pytest.raises(ValueError, match="goal_lateral_tolerance"):
+        line_path(goal_lateral_tolerance=0.0)
 
 
 def test_waypoints_from_csv(tmp_path):

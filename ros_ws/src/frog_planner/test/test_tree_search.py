@@ -234,3 +234,63 @@ def test_world_state_entry_applies_step5(tiny):
     da = a.decide_from_world_state([0.05, 0.01, th, world[0], world[1], 0.1])
     db = b.decide([0.05, 0.01, th], [0.02, 0.005, 0.1])
     assert da.sequence == db.sequence and da.total_cost == pytest.approx(db.total_cost)
+
+
+# ---- velocity look-ahead and yaw-rate term (options beyond the paper) ------------------------------------------
+
+def ref_coast(pose, body_velocity, tau, steps=20000):
+    """Constant body twist integrated by small explicit steps (independent of the closed form)."""
+    x, y, th = pose
+    u, v, r = body_velocity
+    dt = tau / steps
+    for _ in range(steps):
+        mid = th + 0.5 * r * dt
+        x += (math.cos(mid) * u - math.sin(mid) * v) * dt
+        y += (math.sin(mid) * u + math.cos(mid) * v) * dt
+        th += r * dt
+    return x, y, th
+
+
+@pytest.mark.parametrize("vel", [(0.02, 0.0, 0.3), (0.01, -0.005, -0.5), (0.03, 0.002, 0.0), (0.0, 0.0, 1e-8)])
+def test_extrapolate_poses_follows_the_constant_twist_arc(vel):
+    from frog_planner.core.tree_search import extrapolate_poses
+    pose = (0.1, -0.2, 2.5)
+    got = extrapolate_poses(np.array([pose]), np.array([vel]), 2.0)[0]
+    want = ref_coast(pose, vel, 2.0)
+    np.testing.assert_allclose(got[:2], want[:2], atol=1e-9)
+    assert abs((got[2] - want[2] + math.pi) % (2 * math.pi) - math.pi) < 1e-9
+    np.testing.assert_array_equal(extrapolate_poses(np.array([pose]), np.array([vel]), 0.0)[0], pose)
+
+
+def test_circle_curvature_is_one_over_its_radius():
+    circle = ellipse_path()                 # the paper's ellipse: a circle of radius 0.138 m, clockwise
+    inner = circle.curvature_at(np.linspace(0.05, 0.95, 19))
+    np.testing.assert_allclose(inner, -1.0 / 0.138, rtol=0.01)
+    assert np.allclose(line_path().curvature_at([0.0, 0.5, 1.0]), 0.0)
+
+
+def test_velocity_lookahead_and_yaw_rate_term_match_brute_force(tiny):
+    states, table = tiny
+    model = TransitionModel(states, table, list("ABCDEFGHI"))
+    path = ellipse_path()
+    pose, vel, tau, w_r = (0.01, 0.02, 1.2), (0.02, 0.0, -0.1), 1.5, 40.0
+    scale = [float(np.ptp(states[:, c])) for c in range(3)]
+    n = ref_nearest(states, vel, "euclidean", scale, 1)[0]
+    costs = []
+    for a in range(9):
+        leaf, leaf_vel = ref_step(pose, table[a][n])
+        coast = ref_coast(leaf, leaf_vel, tau)
+        eq19 = ref_cost(path, coast, 0.0, 0.1)
+        # the curvature the path has at the closest point, from the circle's geometry: -1/r
+        kappa = -1.0 / 0.138
+        costs.append(eq19 + w_r * abs(leaf_vel[2] - kappa * leaf_vel[0]))
+    result = search(model, path, pose, vel, 1, CostWeights(), 0.0, heading_lookahead=0.1,
+                    velocity_lookahead=tau, yaw_rate_weight=w_r)
+    np.testing.assert_allclose(result.leaf_total, costs, rtol=2e-3)
+    assert result.first_action == int(np.argmin(costs))
+    # the leaves reported are the predicted ones, not the extrapolated ones
+    np.testing.assert_allclose(result.leaf_poses[0, :2], ref_step(pose, table[0][n])[0][:2])
+    with pytest.raises(ValueError, match="velocity_lookahead"):
+        search(model, path, pose, vel, 1, velocity_lookahead=-1.0)
+    with pytest.raises(ValueError, match="yaw_rate_weight"):
+        Planner(model, path, yaw_rate_weight=float("nan"))

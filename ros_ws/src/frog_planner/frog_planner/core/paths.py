@@ -131,6 +131,10 @@ class Path:
     goal_min_progress : float
         Progress in [0, 1] that must also be reached for the goal test when a progress is
         given (keeps the start of a near-closed path from counting as its end).
+    goal_lateral_tolerance : float, optional
+        Crossing the finish line (the normal through the last point) counts as reaching the
+        goal only within this distance in m of the last point along that line; default
+        (None): ``goal_tolerance``.
     name : str
         A label for logs and plots.
 
@@ -139,6 +143,8 @@ class Path:
     points : numpy.ndarray, shape (n_points, 2)
     tangent_headings : numpy.ndarray, shape (n_points,)
         Heading of the path's tangent at each point, rad (second-order differences of the points).
+    curvatures : numpy.ndarray, shape (n_points,)
+        Signed curvature at each point, 1/m (positive turning left).
     arc_length : numpy.ndarray, shape (n_points,)
         Cumulative arc length in m, from 0 to ``length``.
     length : float
@@ -152,7 +158,7 @@ class Path:
     """
 
     def __init__(self, points, n_points=PAPER_N_POINTS, progress_window=0.3, goal_tolerance=0.03,
-                 goal_min_progress=0.9, name="path"):
+                 goal_min_progress=0.9, name="path", goal_lateral_tolerance=None):
         self.points = resample_by_arc_length(points, n_points)
         self.name = str(name)
         if not progress_window > 0.0:
@@ -164,6 +170,11 @@ class Path:
         self.progress_window = float(progress_window)
         self.goal_tolerance = float(goal_tolerance)
         self.goal_min_progress = float(goal_min_progress)
+        if goal_lateral_tolerance is None:
+            goal_lateral_tolerance = goal_tolerance
+        if not goal_lateral_tolerance > 0.0:
+            raise ValueError(f"goal_lateral_tolerance {goal_lateral_tolerance} m must be > 0")
+        self.goal_lateral_tolerance = float(goal_lateral_tolerance)
         seg = np.diff(self.points, axis=0)
         self._segment_length = np.hypot(seg[:, 0], seg[:, 1])
         self.arc_length = np.concatenate([[0.0], np.cumsum(self._segment_length)])
@@ -171,6 +182,8 @@ class Path:
         grad = np.gradient(self.points, axis=0, edge_order=2 if len(self.points) > 2 else 1)
         self.tangent_headings = np.arctan2(grad[:, 1], grad[:, 0])
         self._unwrapped_tangent = np.unwrap(self.tangent_headings)
+        self.curvatures = (np.gradient(self._unwrapped_tangent, self.arc_length) if len(self.points) > 2
+                           else np.zeros(len(self.points)))
 
     @classmethod
     def from_points(cls, points, **kwargs):
@@ -205,6 +218,14 @@ class Path:
         """Tangent heading in rad at progress in [0, 1]: ``tangent_headings`` interpolated along the arc."""
         s = np.clip(np.asarray(progress, dtype=float), 0.0, 1.0) * self.length
         return wrap_angle(np.interp(s, self.arc_length, self._unwrapped_tangent))
+
+    def curvature_at(self, progress):
+        """Signed curvature in 1/m (positive turning left) at progress in [0, 1].
+
+        d(tangent heading)/d(arc length) at the points, interpolated along the arc.
+        """
+        s = np.clip(np.asarray(progress, dtype=float), 0.0, 1.0) * self.length
+        return np.interp(s, self.arc_length, self.curvatures)
 
     def project(self, positions, previous_progress=0.0):
         """Closest points of ``positions`` on the path window ahead of ``previous_progress``.
@@ -288,13 +309,14 @@ class Path:
             The planner's current (monotone) progress. When given, it must also be at least
             ``goal_min_progress``; pass it for paths whose start lies near their end. A
             progress of 1 also counts when the position has crossed the line through the last
-            point normal to the path (the finish line), however far to the side.
+            point normal to the path (the finish line) within ``goal_lateral_tolerance`` of
+            the last point along that line (a robot far to the side has not reached the goal).
 
         Returns
         -------
         bool
             True when within ``goal_tolerance`` of the last point (and far enough along), or
-            past the finish line with progress 1.
+            past the finish line with progress 1 and within the lateral tolerance.
         """
         p = np.asarray(pose, dtype=float)[:2]
         offset = p - self.points[-1]
@@ -302,7 +324,9 @@ class Path:
         if progress is None:
             return bool(near)
         end_heading = self.tangent_headings[-1]
-        crossed = progress >= 1.0 and offset[0] * np.cos(end_heading) + offset[1] * np.sin(end_heading) >= 0.0
+        along = offset[0] * np.cos(end_heading) + offset[1] * np.sin(end_heading)
+        lateral = -offset[0] * np.sin(end_heading) + offset[1] * np.cos(end_heading)
+        crossed = progress >= 1.0 and along >= 0.0 and abs(lateral) <= self.goal_lateral_tolerance
         return bool((near and progress >= self.goal_min_progress) or crossed)
 
 
@@ -458,7 +482,8 @@ def path_from_spec(kind, start=(0.0, 0.0), heading=0.0, waypoint_file=None, star
         the start is along its local +y, begins straight ahead of the robot).
     **params
         Curve parameters (``length``, ``A``, ``f``, ``s_f``) and :class:`Path` settings
-        (``n_points``, ``progress_window``, ``goal_tolerance``, ``goal_min_progress``).
+        (``n_points``, ``progress_window``, ``goal_tolerance``, ``goal_min_progress``,
+        ``goal_lateral_tolerance``).
 
     Returns
     -------
@@ -479,7 +504,8 @@ def path_from_spec(kind, start=(0.0, 0.0), heading=0.0, waypoint_file=None, star
                     "waypoints": set()}
     if name not in curve_params:
         raise ValueError(f"path type {kind!r} is unknown; expected one of {list(PATH_KINDS)}")
-    allowed = curve_params[name] | {"n_points", "progress_window", "goal_tolerance", "goal_min_progress", "name"}
+    allowed = curve_params[name] | {"n_points", "progress_window", "goal_tolerance", "goal_min_progress", "name",
+                                     "goal_lateral_tolerance"}
     extra = sorted(set(params) - allowed)
     if extra:
         raise ValueError(f"path type {name!r} takes no parameter(s) {extra}; expected some of {sorted(allowed)}")

@@ -49,7 +49,7 @@ class Decision:
     name : str
         Its name (``A``..``I``).
     total_cost : float
-        Eq. 19 at the leaf of the chosen sequence.
+        Cost at the leaf of the chosen sequence: eq. 19 plus the optional yaw-rate term.
     cost_terms : CostTerms
         Weighted terms at that leaf.
     predicted_pose : numpy.ndarray, shape (3,)
@@ -66,6 +66,9 @@ class Decision:
         The chosen primitive sequence (length = depth).
     goal_reached : bool
         Whether the measured pose has reached the end of the path.
+    yaw_rate_cost : float
+        The yaw-rate term at the chosen leaf (0 unless ``yaw_rate_weight`` > 0);
+        ``total_cost`` = sum of ``cost_terms`` + this.
     """
 
     primitive_id: int
@@ -79,6 +82,7 @@ class Decision:
     current_cost_terms: CostTerms
     sequence: tuple
     goal_reached: bool
+    yaw_rate_cost: float = 0.0
 
 
 def _vector(value, name, unit):
@@ -104,6 +108,12 @@ class Planner:
     heading_lookahead : float
         0 (the paper): heading error against the path tangent; > 0 (m): against the direction
         to the path point this far ahead of the closest one (see :func:`path_cost`).
+    velocity_lookahead : float
+        0 (the paper): cost at the predicted leaf pose. > 0 (s): cost at the leaf pose
+        extrapolated by its predicted velocities over this time (see :func:`search`).
+    yaw_rate_weight : float
+        w_r per rad/s; 0 (the paper) leaves it out. > 0 adds w_r * |predicted yaw rate -
+        path curvature * predicted forward speed| at the leaf (see :func:`search`).
 
     Examples
     --------
@@ -113,7 +123,8 @@ class Planner:
     (1, 'B')
     """
 
-    def __init__(self, model, path, weights=CostWeights(), depth=1, heading_lookahead=0.0):
+    def __init__(self, model, path, weights=CostWeights(), depth=1, heading_lookahead=0.0,
+                 velocity_lookahead=0.0, yaw_rate_weight=0.0):
         if not isinstance(weights, CostWeights):
             weights = CostWeights(*weights)
         depth = int(depth)
@@ -126,6 +137,12 @@ class Planner:
         if not (np.isfinite(heading_lookahead) and heading_lookahead >= 0.0):
             raise ValueError(f"heading_lookahead {heading_lookahead} m must be a finite number >= 0")
         self.heading_lookahead = float(heading_lookahead)
+        if not (np.isfinite(velocity_lookahead) and velocity_lookahead >= 0.0):
+            raise ValueError(f"velocity_lookahead {velocity_lookahead} s must be a finite number >= 0")
+        self.velocity_lookahead = float(velocity_lookahead)
+        if not (np.isfinite(yaw_rate_weight) and yaw_rate_weight >= 0.0):
+            raise ValueError(f"yaw_rate_weight {yaw_rate_weight} must be a finite number >= 0")
+        self.yaw_rate_weight = float(yaw_rate_weight)
         self._progress = 0.0
 
     @property
@@ -164,7 +181,7 @@ class Planner:
         now = path_cost(self.path, pose, self.weights, self._progress, self.heading_lookahead)
         self._progress = max(self._progress, float(now.progress[0]))
         result = search(self.model, self.path, pose, body_velocity, self.depth, self.weights, self._progress,
-                        self.heading_lookahead)
+                        self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight)
         first = result.first_action
         return Decision(
             primitive_id=int(first), name=self.model.primitive_names[first], total_cost=result.total_cost,
@@ -172,7 +189,8 @@ class Planner:
             predicted_pose=result.first_poses[first].copy(), progress=self._progress,
             distance_to_path=float(now.distance[0]), current_cost=float(now.total[0]),
             current_cost_terms=CostTerms.from_array(now.terms[0]), sequence=result.sequence,
-            goal_reached=self.path.goal_reached(pose, self._progress))
+            goal_reached=self.path.goal_reached(pose, self._progress),
+            yaw_rate_cost=float(result.yaw_rate_cost[result.best_leaf]))
 
     def decide_from_world_state(self, state):
         """:meth:`decide` from a world-frame state [x, y, theta, x_dot, y_dot, theta_dot] (Algorithm 1 step 5).

@@ -121,6 +121,8 @@ class SearchResult:
         Predicted world pose after one period for each first action.
     best_leaf : int
         Index of the cheapest leaf.
+    yaw_rate_cost : numpy.ndarray, shape (P^H,)
+        w_r * |yaw rate - path curvature * forward speed| at every leaf (zeros when w_r = 0).
     """
 
     sequence: tuple
@@ -128,6 +130,12 @@ class SearchResult:
     leaf_poses: np.ndarray
     first_poses: np.ndarray
     best_leaf: int
+    yaw_rate_cost: np.ndarray
+
+    @property
+    def leaf_total(self):
+        """Cost of every leaf: eq. 19 plus the yaw-rate term, shape (P^H,)."""
+        return self.leaf_cost.total + self.yaw_rate_cost
 
     @property
     def first_action(self):
@@ -136,11 +144,11 @@ class SearchResult:
 
     @property
     def total_cost(self):
-        """Cost of the cheapest leaf."""
-        return float(self.leaf_cost.total[self.best_leaf])
+        """Cost of the cheapest leaf (eq. 19 plus the yaw-rate term)."""
+        return float(self.leaf_cost.total[self.best_leaf] + self.yaw_rate_cost[self.best_leaf])
 
 
-def expand_tree(model, pose, body_velocity, depth):
+def expand_tree(model, pose, body_velocity, depth, return_velocities=False):
     """Predict the leaves of all P^H sequences (Algorithm 1 steps 5-14, vectorised).
 
     Parameters
@@ -152,11 +160,15 @@ def expand_tree(model, pose, body_velocity, depth):
         Current body velocity (forward m/s, lateral m/s, yaw rate rad/s).
     depth : int
         H, 1 <= H <= 5.
+    return_velocities : bool
+        Also return the predicted body velocities at the leaves.
 
     Returns
     -------
     leaf_poses : numpy.ndarray, shape (P^H, 3)
     first_poses : numpy.ndarray, shape (P, 3)
+    leaf_velocities : numpy.ndarray, shape (P^H, 3)
+        Only with ``return_velocities``: forward m/s, lateral m/s, yaw rate rad/s.
     """
     depth = int(depth)
     if not 1 <= depth <= MAX_DEPTH:
@@ -171,11 +183,53 @@ def expand_tree(model, pose, body_velocity, depth):
         velocities = velocities.reshape(-1, 3)
         if first is None:
             first = poses.copy()
+    if return_velocities:
+        return poses, first, velocities
     return poses, first
 
 
+def extrapolate_poses(poses, body_velocities, horizon):
+    """Poses after coasting ``horizon`` seconds at constant body velocity and yaw rate.
+
+    Exact integration of a constant twist (a circular arc): the body turns by r*tau while
+    moving with (u, v) in its own frame. Used to make the velocity state a leaf ends in
+    visible to the cost (a turn's payoff is the yaw rate that keeps acting after T).
+
+    Parameters
+    ----------
+    poses : array_like, shape (M, 3)
+        x m, y m, heading rad (world frame).
+    body_velocities : array_like, shape (M, 3)
+        forward m/s, lateral m/s, yaw rate rad/s.
+    horizon : float
+        tau in s, >= 0 (0 returns the poses unchanged).
+
+    Returns
+    -------
+    numpy.ndarray, shape (M, 3)
+        Heading wrapped to [-pi, pi).
+    """
+    p = np.atleast_2d(np.asarray(poses, dtype=float))
+    v = np.atleast_2d(np.asarray(body_velocities, dtype=float))
+    tau = float(horizon)
+    if tau == 0.0:
+        return p.copy()
+    u, w, r = v[:, 0], v[:, 1], v[:, 2]
+    a = r * tau
+    small = np.abs(a) < 1e-6
+    a_safe = np.where(small, 1.0, a)
+    # integral_0^tau of R(r t) dt, divided by tau: [[sin a / a, -(1 - cos a) / a], [(1 - cos a) / a, sin a / a]]
+    sa = np.where(small, 1.0 - a * a / 6.0, np.sin(a_safe) / a_safe)
+    ca = np.where(small, a / 2.0, (1.0 - np.cos(a_safe)) / a_safe)
+    dx_body = tau * (sa * u - ca * w)
+    dy_body = tau * (ca * u + sa * w)
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    return np.column_stack([p[:, 0] + c * dx_body - s * dy_body, p[:, 1] + s * dx_body + c * dy_body,
+                            wrap_angle(p[:, 2] + a)])
+
+
 def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), previous_progress=0.0,
-           heading_lookahead=0.0):
+           heading_lookahead=0.0, velocity_lookahead=0.0, yaw_rate_weight=0.0):
     """Cheapest of all P^H primitive sequences under eq. 19 (Algorithm 1).
 
     Parameters
@@ -193,14 +247,34 @@ def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), pre
         The current progress in [0, 1]; leaves' progress is searched ahead of it.
     heading_lookahead : float
         See :func:`path_cost` (0: the paper's tangent heading error).
+    velocity_lookahead : float
+        0 (the paper): eq. 19 at the leaf poses. > 0 (s): at the leaf poses extrapolated by
+        their predicted body velocities and yaw rate over this time (:func:`extrapolate_poses`),
+        so that the velocity state a sequence leaves behind counts.
+    yaw_rate_weight : float
+        w_r per rad/s (0: the paper). Adds w_r * |r - kappa * u| at each leaf: the predicted
+        yaw rate r against the rate the path needs at the predicted forward speed u
+        (kappa: signed path curvature at the leaf's closest point), so that a turn's payoff,
+        the yaw rate it leaves, counts although its heading change within T is small.
 
     Returns
     -------
     SearchResult
+        ``leaf_poses`` are the predicted (not extrapolated) leaves.
     """
-    leaves, first = expand_tree(model, pose, body_velocity, depth)
-    cost = path_cost(path, leaves, weights, previous_progress, heading_lookahead)
-    best = int(np.argmin(cost.total))
+    if not (np.isfinite(velocity_lookahead) and velocity_lookahead >= 0.0):
+        raise ValueError(f"velocity_lookahead {velocity_lookahead} s must be a finite number >= 0")
+    leaves, first, leaf_velocities = expand_tree(model, pose, body_velocity, depth, return_velocities=True)
+    costed = extrapolate_poses(leaves, leaf_velocities, velocity_lookahead) if velocity_lookahead > 0 else leaves
+    cost = path_cost(path, costed, weights, previous_progress, heading_lookahead)
+    if not (np.isfinite(yaw_rate_weight) and yaw_rate_weight >= 0.0):
+        raise ValueError(f"yaw_rate_weight {yaw_rate_weight} must be a finite number >= 0")
+    if yaw_rate_weight > 0.0:
+        needed = path.curvature_at(cost.progress) * leaf_velocities[:, 0]
+        yaw_cost = yaw_rate_weight * np.abs(leaf_velocities[:, 2] - needed)
+    else:
+        yaw_cost = np.zeros(len(leaves))
+    best = int(np.argmin(cost.total + yaw_cost))
     n_prim = model.n_primitives
     digits = []
     rest = best
@@ -208,4 +282,4 @@ def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), pre
         digits.append(rest % n_prim)
         rest //= n_prim
     return SearchResult(sequence=tuple(reversed(digits)), leaf_cost=cost, leaf_poses=leaves,
-                        first_poses=first, best_leaf=best)
+                        first_poses=first, best_leaf=best, yaw_rate_cost=yaw_cost)

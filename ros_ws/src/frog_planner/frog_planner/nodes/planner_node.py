@@ -39,6 +39,8 @@ _PARAMS = [
     ("w_progress", 300.0, "eq. 19 weight w_c of (1 - progress)"),
     ("heading_lookahead", 0.0, "heading error against the path this far ahead [m]; 0 = the "
                                "paper's path tangent at the closest point"),
+    ("velocity_lookahead", 0.0, "cost each leaf pose extrapolated by its predicted body velocities "
+                                "and yaw rate over this time [s]; 0 = the paper (cost at the leaf)"),
     ("path_type", "line", "line, sine, ellipse or waypoints"),
     ("path_length", 0.0, "path length/size [m]; 0 = the paper's value for the path type"),
     ("path_start_x", 0.0, "path start x in the world frame [m]"),
@@ -46,6 +48,8 @@ _PARAMS = [
     ("path_heading", 0.0, "direction of the path at its start [rad]"),
     ("waypoint_file", "", "CSV with header x,y [m] (path_type waypoints)"),
     ("goal_tolerance", 0.03, "distance to the path's end that counts as reached [m]"),
+    ("goal_lateral_tolerance", 0.0, "crossing the finish line (normal at the path's end) counts only "
+                                    "this close to the end along that line [m]; 0 = goal_tolerance"),
     ("odom_topic", "/frog/odom", "odometry input (tracker, or the simulator's ground truth)"),
     ("world_frame", "tank", "frame of the path and the status poses"),
     ("stale_periods", 2.0, "odometry older than this many periods is stale"),
@@ -60,8 +64,9 @@ def yaw_of(q) -> float:
 
 def build_path(p: dict):
     """The reference path from the node parameters (core path builders)."""
-    kw = {"start": (p["path_start_x"], p["path_start_y"]), "heading": p["path_heading"],
-          "goal_tolerance": p["goal_tolerance"]}
+    goal = {"goal_tolerance": p["goal_tolerance"],
+            "goal_lateral_tolerance": p["goal_lateral_tolerance"] or None}
+    kw = {"start": (p["path_start_x"], p["path_start_y"]), "heading": p["path_heading"], **goal}
     if p["path_length"] > 0:
         kw["length"] = p["path_length"]
     kind = p["path_type"]
@@ -74,7 +79,7 @@ def build_path(p: dict):
     if kind == "waypoints":
         if not p["waypoint_file"]:
             raise ConfigurationError("path_type waypoints needs the parameter waypoint_file")
-        return waypoint_path_from_csv(p["waypoint_file"], goal_tolerance=p["goal_tolerance"])
+        return waypoint_path_from_csv(p["waypoint_file"], **goal)
     raise ConfigurationError(f"path_type {kind!r} is not one of line, sine, ellipse, waypoints")
 
 
@@ -127,12 +132,15 @@ class PlannerNode(Node):
                   ("stale_periods", p["stale_periods"] > 0, "> 0"),
                   ("goal_tolerance", p["goal_tolerance"] > 0, "> 0 m"),
                   ("path_length", p["path_length"] >= 0, ">= 0 m"),
-                  ("heading_lookahead", p["heading_lookahead"] >= 0, ">= 0 m")]
+                  ("goal_lateral_tolerance", p["goal_lateral_tolerance"] >= 0, ">= 0 m"),
+                  ("heading_lookahead", p["heading_lookahead"] >= 0, ">= 0 m"),
+                  ("velocity_lookahead", p["velocity_lookahead"] >= 0, ">= 0 s")]
         for name, ok, expected in checks:
             if not ok:
                 raise ConfigurationError(f"parameter {name} = {p[name]!r} must be {expected}")
         for name in ("w_distance", "w_heading", "w_progress", "path_start_x", "path_start_y",
-                     "path_heading", "period", "path_length"):
+                     "path_heading", "period", "path_length", "heading_lookahead", "velocity_lookahead",
+                     "goal_tolerance", "goal_lateral_tolerance"):
             if not math.isfinite(p[name]):
                 raise ConfigurationError(f"parameter {name} = {p[name]!r} must be finite")
 
@@ -146,7 +154,8 @@ class PlannerNode(Node):
                 model = TransitionModel.load(p["library_file"], period=p["period"],
                                              metric=p["metric"], k=p["k_neighbours"])
                 self.planner = Planner(model, self.path, self.weights, p["depth"],
-                                       heading_lookahead=p["heading_lookahead"])
+                                       heading_lookahead=p["heading_lookahead"],
+                                       velocity_lookahead=p["velocity_lookahead"])
                 self.library_error = None
                 self.get_logger().info(f"library {p['library_file']}: {model.n_states} states, "
                                        f"{model.n_primitives} primitives")
