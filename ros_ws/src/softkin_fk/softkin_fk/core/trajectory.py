@@ -128,7 +128,7 @@ class ConfigurationSpace:
 
 
 def sample_configuration_space(solver: ForwardSolver, n_per_axis: int = 5, marker: str = 'tip',
-                               fk_tol: float = 1e-7, progress: Optional[Callable] = None) -> ConfigurationSpace:
+                               fk_tol: float = 1e-6, progress: Optional[Callable] = None) -> ConfigurationSpace:
     """Forward kinematics on an actuation grid (n_per_axis ** n_a samples), warm started.
 
     Parameters
@@ -139,7 +139,8 @@ def sample_configuration_space(solver: ForwardSolver, n_per_axis: int = 5, marke
     marker : str
         Tracked marker.
     fk_tol : float
-        FK tolerance (m).
+        FK tolerance (m); the samples only seed IK (which re-solves at its own tolerance),
+        so 1 um is ample.
     progress : callable, optional
         Called with the number of finished samples (e.g. a tqdm ``update``).
 
