@@ -89,6 +89,10 @@ def start_graph(args, out: Path, domain, planner: bool):
             "library_file": str(args.library), "path_type": args.path, "period": args.period,
             "depth": args.depth, "metric": args.metric,
             "heading_lookahead": args.heading_lookahead,
+            "gradient_correction": args.gradient_correction,
+            "velocity_lookahead": args.velocity_lookahead, "yaw_rate_weight": args.yaw_rate_weight,
+            "w_distance": args.w_a, "w_heading": args.w_b, "w_progress": args.w_c,
+            "goal_lateral_tolerance": args.goal_lateral_tolerance,
             "use_sim_time": args.real_time_factor != 1.0})],
             domain.env, out / "planner_node.log", "planner_node")
         procs.append(pl)
@@ -192,6 +196,9 @@ def analyse_closed_loop(mcap: Path, out: Path, args) -> dict:
     metrics = {
         "path": args.path, "path_length_m": length, "period_s": args.period, "depth": args.depth,
         "metric": args.metric, "heading_lookahead_m": args.heading_lookahead,
+        "gradient_correction": args.gradient_correction,
+        "velocity_lookahead_s": args.velocity_lookahead, "yaw_rate_weight": args.yaw_rate_weight,
+        "weights": [args.w_a, args.w_b, args.w_c],
         "library": str(args.library), "goal_reached": goal,
         "completion_time_s": float(end_t) if goal else None, "final_progress": progress,
         "mean_distance_m": float(dist.mean()), "max_distance_m": float(dist.max()),
@@ -282,8 +289,20 @@ def main(argv=None) -> int:
     ap.add_argument("--period", type=float, default=1.5, help="primitive period T [s]")
     ap.add_argument("--depth", type=int, default=1)
     ap.add_argument("--metric", choices=["euclidean", "relative"], default="euclidean")
-    ap.add_argument("--heading-lookahead", type=float, default=0.0,
-                    help="planner heading error against the path this far ahead [m]")
+    ap.add_argument("--heading-lookahead", type=float, default=0.1,
+                    help="planner heading error against the path this far ahead [m] (0 = paper: tangent)")
+    ap.add_argument("--gradient-correction", action=argparse.BooleanOptionalAction, default=False,
+                    help="planner corrects library transitions to first order for the velocity difference")
+    ap.add_argument("--velocity-lookahead", type=float, default=0.0,
+                    help="planner costs each leaf extrapolated by its predicted velocities over this time [s] "
+                         "(0 = paper)")
+    ap.add_argument("--yaw-rate-weight", type=float, default=0.0,
+                    help="planner weight per rad/s of |yaw rate - path curvature x speed| (0 = paper)")
+    ap.add_argument("--w-a", type=float, default=500.0, help="eq. 19 weight of the distance to the path")
+    ap.add_argument("--w-b", type=float, default=50.0, help="eq. 19 weight of the heading error")
+    ap.add_argument("--w-c", type=float, default=300.0, help="eq. 19 weight of (1 - progress)")
+    ap.add_argument("--goal-lateral-tolerance", type=float, default=0.0,
+                    help="crossing the finish line counts only this close to the end [m] (0 = goal tolerance)")
     ap.add_argument("--library", type=Path, default=DEFAULT_LIBRARY)
     ap.add_argument("--library-states", type=int, default=200, help="size if generated")
     ap.add_argument("--max-time", type=float, default=90.0, help="simulated seconds at most")

@@ -12,6 +12,7 @@ EPILOG = """examples:
   frog-planner-eval --library LIB --path ellipse --depth 2 --metric relative --out runs/eval
   frog-planner-eval --library LIB --compare --out runs/compare     # depths 1-3 x both metrics
   frog-planner-eval --library LIB --path line --lateral-offset 0.05 --out runs/offset
+  frog-planner-eval --library LIB --compare --paper-cost --out runs/paper   # the paper's exact eq. 19
 
 Writes per run <path>_d<depth>_<metric>.{json,png,npz} (Fig. 5d-g and S3 style plots) and
 a metrics.json summary into --out.
@@ -25,7 +26,7 @@ def _run(args, path_name, depth, metric, model_cache):
     key = (metric, args.k)
     if key not in model_cache:
         model_cache[key] = TransitionModel.load(args.library, period=args.period, metric=metric,
-                                                k=args.k)
+                                                k=args.k, gradient_correction=args.gradient_correction)
     path = PATHS[path_name]()
     res = run_closed_loop(path, model_cache[key], depth=depth, period=args.period,
                           weights=CostWeights(args.w_a, args.w_b, args.w_c),
@@ -49,12 +50,18 @@ def main(argv=None) -> int:
     ap.add_argument("--depth", type=int, default=1)
     ap.add_argument("--metric", choices=["euclidean", "relative"], default="euclidean")
     ap.add_argument("--k", type=int, default=1, help="nearest neighbours averaged")
+    ap.add_argument("--gradient-correction", action=argparse.BooleanOptionalAction, default=False,
+                    help="correct the nearest state's transitions to first order for the query's velocity "
+                         "difference (library-fitted slopes); --no-gradient-correction = paper")
     ap.add_argument("--period", type=float, default=1.5, help="primitive period T [s]")
     ap.add_argument("--w-a", type=float, default=500.0)
     ap.add_argument("--w-b", type=float, default=50.0)
     ap.add_argument("--w-c", type=float, default=300.0)
-    ap.add_argument("--heading-lookahead", type=float, default=0.0,
-                    help="heading error against the path this far ahead [m] (0 = paper's tangent)")
+    ap.add_argument("--heading-lookahead", type=float, default=0.1,
+                    help="heading error against the path this far ahead [m] (default 0.1; 0 = paper's tangent)")
+    ap.add_argument("--paper-cost", action="store_true",
+                    help="the paper's exact cost: eq. 19 at the leaf, tangent heading, weights 500/50/300 "
+                         "(overrides the weight and look-ahead options)")
     ap.add_argument("--velocity-lookahead", type=float, default=0.0,
                     help="cost each leaf extrapolated by its predicted velocities over this time [s] "
                          "(0 = paper: cost at the predicted pose)")
@@ -65,6 +72,10 @@ def main(argv=None) -> int:
     ap.add_argument("--compare", action="store_true", help="depths 1-3 x both metrics on every path")
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args(argv)
+    if args.paper_cost:
+        args.w_a, args.w_b, args.w_c = 500.0, 50.0, 300.0
+        args.heading_lookahead = args.velocity_lookahead = args.w_r = 0.0
+        args.gradient_correction = False
     from frog_planner.core.library_file import LibraryFormatError
     paths = ["line", "sine", "ellipse"] if args.path == "all" or args.compare else [args.path]
     runs = ([(p, d, m) for m in ("euclidean", "relative") for d in (1, 2, 3) for p in paths]

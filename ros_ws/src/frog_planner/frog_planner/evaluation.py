@@ -18,7 +18,7 @@ from typing import Optional
 import numpy as np
 
 from frog_planner.core.paths import Path, ellipse_path, line_path, sinusoid_path
-from frog_planner.core.planner import Planner
+from frog_planner.core.planner import DEFAULT_HEADING_LOOKAHEAD, Planner
 from frog_planner.core.transition_model import TransitionModel
 from frog_planner.core.tree_search import CostWeights
 
@@ -41,7 +41,7 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
                     weights: CostWeights = CostWeights(), period: float = 1.5,
                     max_time: Optional[float] = None, start_offset=(0.0, 0.0, 0.0),
                     sim_params: Optional[dict] = None, sample_interval: float = 0.05,
-                    heading_lookahead: float = 0.0,
+                    heading_lookahead: float = DEFAULT_HEADING_LOOKAHEAD,
                     velocity_lookahead: float = 0.0,
                     yaw_rate_weight: float = 0.0,
                     simulation=None) -> ClosedLoopResult:
@@ -66,7 +66,7 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     sim_params : dict, optional
         FrogParameters overrides for the simulator.
     heading_lookahead : float
-        Heading error against the path this far ahead [m] (0 = the paper's tangent).
+        Heading error against the path this far ahead [m] (0 = the paper's tangent; default 0.1).
     velocity_lookahead : float
         Cost the leaves extrapolated by their predicted velocities over this time [s]
         (0 = the paper: cost at the predicted leaf pose).
@@ -138,7 +138,8 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     end = goal_time if goal_time is not None else float(t[-1])
     metrics = {
         "path": path.name, "path_length_m": path.length, "depth": depth, "period_s": period,
-        "metric": model.metric, "k_neighbours": model.k, "heading_lookahead_m": heading_lookahead,
+        "metric": model.metric, "k_neighbours": model.k,
+        "gradient_correction": model.gradient_correction, "heading_lookahead_m": heading_lookahead,
         "velocity_lookahead_s": velocity_lookahead, "yaw_rate_weight": yaw_rate_weight,
         "weights": [weights.distance, weights.heading, weights.progress],
         "goal_reached": goal_time is not None,

@@ -158,3 +158,25 @@ def test_states_marked_not_converged_are_dropped_when_loading(tmp_path, syntheti
     model = TransitionModel.load(synthetic.write_library(tmp_path / "lib.npz", arrays), period=1.5)
     assert model.n_states == 9 and model.dropped_states == 1
     assert not np.any(np.all(model.initial_states == arrays["initial_states"][4], axis=1))
+
+
+def test_gradient_correction_recovers_a_linear_library_exactly():
+    """Transitions that are exactly affine in the initial state: the corrected lookup equals
+    the affine function at the query (not at the nearest state), for k = 1 and k = 3."""
+    rng = np.random.default_rng(4)
+    states = rng.uniform([0.0, -0.03, -0.5], [0.04, 0.03, 0.5], size=(60, 3))
+    slopes = rng.normal(size=(9, 3, 6))
+    offsets = rng.normal(size=(9, 6)) * 0.01
+    table = np.einsum("nc,pco->pno", states, slopes) + offsets[:, None, :]
+    queries = rng.uniform([0.0, -0.03, -0.5], [0.04, 0.03, 0.5], size=(5, 3))
+    truth = np.einsum("mc,pco->mpo", queries, slopes) + offsets[None]
+    for k in (1, 3):
+        model = TransitionModel(states, table * [1, 1, 0.01, 1, 1, 1], list("ABCDEFGHI"), k=k,
+                                gradient_correction=True)
+        got = model.lookup(queries)
+        np.testing.assert_allclose(got, truth * [1, 1, 0.01, 1, 1, 1], atol=1e-9)
+    plain = TransitionModel(states, table, list("ABCDEFGHI"))
+    nearest = plain.nearest(queries)[0][:, 0]
+    np.testing.assert_array_equal(plain.lookup(queries), table[:, nearest].transpose(1, 0, 2))
+    with pytest.raises(ValueError, match="at least 4"):
+        TransitionModel(states[:3], table[:, :3], list("ABCDEFGHI"), gradient_correction=True)

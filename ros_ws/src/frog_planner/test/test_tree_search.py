@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from frog_planner.core.paths import ellipse_path, line_path, sinusoid_path
-from frog_planner.core.planner import Planner
+from frog_planner.core.planner import PAPER_COST, Planner
 from frog_planner.core.transition_model import TransitionModel
 from frog_planner.core.tree_search import CostWeights, search
 
@@ -178,7 +178,7 @@ def test_planner_decision_fields(tiny):
     states, table = tiny
     model = TransitionModel(states, table, list("ABCDEFGHI"))
     path = line_path(length=0.4)
-    planner = Planner(model, path, depth=2)
+    planner = Planner(model, path, depth=2, **PAPER_COST)
     d = planner.decide([0.1, 0.01, 0.0], [0.02, 0.0, 0.0])
     assert 0 <= d.primitive_id < 9 and d.name == "ABCDEFGHI"[d.primitive_id]
     assert len(d.sequence) == 2 and d.sequence[0] == d.primitive_id
@@ -192,6 +192,10 @@ def test_planner_decision_fields(tiny):
     np.testing.assert_allclose(d.predicted_pose[:2], ref_step((0.1, 0.01, 0.0), table[d.primitive_id][n[0]])[0][:2])
     assert not d.goal_reached
     assert planner.decide([0.395, 0.0, 0.0], [0.02, 0.0, 0.0]).goal_reached
+    # The default planner measures heading against the path point 0.1 m ahead: from (0.1, 0.01)
+    # that is (0.2, 0), atan(0.01 / 0.1) to the right of the heading.
+    d = Planner(model, path, depth=2).decide([0.1, 0.01, 0.0], [0.02, 0.0, 0.0])
+    assert d.current_cost_terms.heading == pytest.approx(W_B * math.atan(0.01 / 0.1))
 
 
 def test_planner_progress_is_monotone_on_the_ellipse(tiny):
