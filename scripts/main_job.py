@@ -291,9 +291,9 @@ def main(argv=None) -> int:
     ap.add_argument("--metric", choices=["euclidean", "relative"], default="euclidean")
     ap.add_argument("--heading-lookahead", type=float, default=0.1,
                     help="planner heading error against the path this far ahead [m] (0 = paper: tangent)")
-    ap.add_argument("--gradient-correction", action=argparse.BooleanOptionalAction, default=False,
+    ap.add_argument("--gradient-correction", action=argparse.BooleanOptionalAction, default=True,
                     help="planner corrects library transitions to first order for the velocity difference")
-    ap.add_argument("--velocity-lookahead", type=float, default=0.0,
+    ap.add_argument("--velocity-lookahead", type=float, default=1.5,
                     help="planner costs each leaf extrapolated by its predicted velocities over this time [s] "
                          "(0 = paper)")
     ap.add_argument("--yaw-rate-weight", type=float, default=0.0,

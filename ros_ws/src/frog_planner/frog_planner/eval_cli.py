@@ -50,7 +50,7 @@ def main(argv=None) -> int:
     ap.add_argument("--depth", type=int, default=1)
     ap.add_argument("--metric", choices=["euclidean", "relative"], default="euclidean")
     ap.add_argument("--k", type=int, default=1, help="nearest neighbours averaged")
-    ap.add_argument("--gradient-correction", action=argparse.BooleanOptionalAction, default=False,
+    ap.add_argument("--gradient-correction", action=argparse.BooleanOptionalAction, default=True,
                     help="correct the nearest state's transitions to first order for the query's velocity "
                          "difference (library-fitted slopes); --no-gradient-correction = paper")
     ap.add_argument("--period", type=float, default=1.5, help="primitive period T [s]")
@@ -60,11 +60,11 @@ def main(argv=None) -> int:
     ap.add_argument("--heading-lookahead", type=float, default=0.1,
                     help="heading error against the path this far ahead [m] (default 0.1; 0 = paper's tangent)")
     ap.add_argument("--paper-cost", action="store_true",
-                    help="the paper's exact cost: eq. 19 at the leaf, tangent heading, weights 500/50/300 "
-                         "(overrides the weight and look-ahead options)")
-    ap.add_argument("--velocity-lookahead", type=float, default=0.0,
+                    help="the paper's exact planner: eq. 19 at the leaf, tangent heading, weights 500/50/300, "
+                         "nearest-state transitions (overrides the weight, look-ahead and correction options)")
+    ap.add_argument("--velocity-lookahead", type=float, default=1.5,
                     help="cost each leaf extrapolated by its predicted velocities over this time [s] "
-                         "(0 = paper: cost at the predicted pose)")
+                         "(default 1.5; 0 = paper: cost at the predicted pose)")
     ap.add_argument("--w-r", type=float, default=0.0,
                     help="weight per rad/s of |yaw rate - path curvature x speed| at the leaf (0 = paper)")
     ap.add_argument("--lateral-offset", type=float, default=0.0, help="start offset left of the path [m]")

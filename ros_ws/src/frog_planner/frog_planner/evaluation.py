@@ -18,7 +18,7 @@ from typing import Optional
 import numpy as np
 
 from frog_planner.core.paths import Path, ellipse_path, line_path, sinusoid_path
-from frog_planner.core.planner import DEFAULT_HEADING_LOOKAHEAD, Planner
+from frog_planner.core.planner import DEFAULT_HEADING_LOOKAHEAD, DEFAULT_VELOCITY_LOOKAHEAD, Planner
 from frog_planner.core.transition_model import TransitionModel
 from frog_planner.core.tree_search import CostWeights
 
@@ -42,7 +42,7 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
                     max_time: Optional[float] = None, start_offset=(0.0, 0.0, 0.0),
                     sim_params: Optional[dict] = None, sample_interval: float = 0.05,
                     heading_lookahead: float = DEFAULT_HEADING_LOOKAHEAD,
-                    velocity_lookahead: float = 0.0,
+                    velocity_lookahead: float = DEFAULT_VELOCITY_LOOKAHEAD,
                     yaw_rate_weight: float = 0.0,
                     simulation=None) -> ClosedLoopResult:
     """Follow ``path`` with the simulated frog until the goal or ``max_time``.
@@ -69,7 +69,7 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
         Heading error against the path this far ahead [m] (0 = the paper's tangent; default 0.1).
     velocity_lookahead : float
         Cost the leaves extrapolated by their predicted velocities over this time [s]
-        (0 = the paper: cost at the predicted leaf pose).
+        (0 = the paper: cost at the predicted leaf pose; default 1.5).
     yaw_rate_weight : float
         w_r per rad/s of |predicted yaw rate - path curvature * forward speed| (0 = the paper).
     simulation : FrogSimulation, optional

@@ -33,7 +33,7 @@ def plant_and_model(synthetic):
 
 def _run(plant, model, depth, lookahead, offset=0.05, max_steps=40):
     path = line_path()
-    planner = Planner(model, path, depth=depth, heading_lookahead=lookahead)
+    planner = Planner(model, path, depth=depth, heading_lookahead=lookahead, velocity_lookahead=0.0)
     pose, vel = np.array([0.0, offset, 0.0]), np.zeros(3)
     distances = []
     for _ in range(max_steps):

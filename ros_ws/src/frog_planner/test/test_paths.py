@@ -145,6 +145,12 @@ def test_goal_reached():
     up = line_path(length=0.4, heading=np.pi / 2)
     assert up.goal_reached([0.02, 0.45], progress=1.0)
     assert not up.goal_reached([0.05, 0.45], progress=1.0)
+    # With the previous position, the crossing point decides: passing the end 5 cm to the side
+    # and then drifting into the band does not count; crossing 1 cm to the side does.
+    assert not path.goal_reached([0.45, 0.02], progress=1.0, previous_pose=[0.42, 0.05])
+    assert not path.goal_reached([0.45, 0.02], progress=1.0, previous_pose=[0.38, 0.09])   # y = 0.06 at x = 0.4
+    assert path.goal_reached([0.42, 0.02], progress=1.0, previous_pose=[0.38, 0.0])        # y = 0.01 at x = 0.4
+    assert path.goal_reached([0.39, 0.0], progress=1.0, previous_pose=[0.30, 0.0])        # near the end counts
     with pytest.raises(ValueError, match="goal_lateral_tolerance"):
         line_path(goal_lateral_tolerance=0.0)
 

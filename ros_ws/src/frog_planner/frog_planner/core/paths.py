@@ -298,7 +298,7 @@ class Path:
         t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
         return float(np.min(np.hypot(*(a + t[:, None] * d - p).T)))
 
-    def goal_reached(self, pose, progress=None):
+    def goal_reached(self, pose, progress=None, previous_pose=None):
         """Whether a pose has reached the end of the path.
 
         Parameters
@@ -308,24 +308,36 @@ class Path:
         progress : float, optional
             The planner's current (monotone) progress. When given, it must also be at least
             ``goal_min_progress``; pass it for paths whose start lies near their end. A
-            progress of 1 also counts when the position has crossed the line through the last
+            progress of 1 also counts when the robot has crossed the line through the last
             point normal to the path (the finish line) within ``goal_lateral_tolerance`` of
             the last point along that line (a robot far to the side has not reached the goal).
+        previous_pose : array_like, shape (2,) or (3,), optional
+            The position at the previous check. When given, the crossing is where the segment
+            from it to ``pose`` meets the finish line (so passing the end far to the side and
+            drifting into the band afterwards does not count); without it, ``pose`` must be
+            past the line and within the band.
 
         Returns
         -------
         bool
             True when within ``goal_tolerance`` of the last point (and far enough along), or
-            past the finish line with progress 1 and within the lateral tolerance.
+            crossing the finish line with progress 1 within the lateral tolerance.
         """
         p = np.asarray(pose, dtype=float)[:2]
         offset = p - self.points[-1]
         near = float(np.hypot(*offset)) <= self.goal_tolerance
         if progress is None:
             return bool(near)
-        end_heading = self.tangent_headings[-1]
-        along = offset[0] * np.cos(end_heading) + offset[1] * np.sin(end_heading)
-        lateral = -offset[0] * np.sin(end_heading) + offset[1] * np.cos(end_heading)
+        c, s = np.cos(self.tangent_headings[-1]), np.sin(self.tangent_headings[-1])
+        along = offset[0] * c + offset[1] * s
+        lateral = -offset[0] * s + offset[1] * c
+        if previous_pose is not None:
+            q = np.asarray(previous_pose, dtype=float)[:2] - self.points[-1]
+            along0, lateral0 = q[0] * c + q[1] * s, -q[0] * s + q[1] * c
+            if along0 < 0.0 <= along:                    # crossed during this step: where?
+                lateral = lateral0 + (lateral - lateral0) * (-along0) / (along - along0)
+            elif along0 >= 0.0:                          # was already past the line
+                along = -1.0
         crossed = progress >= 1.0 and along >= 0.0 and abs(lateral) <= self.goal_lateral_tolerance
         return bool((near and progress >= self.goal_min_progress) or crossed)
 

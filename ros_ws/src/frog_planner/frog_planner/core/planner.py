@@ -88,6 +88,9 @@ class Decision:
 #: Default heading look-ahead [m]: chosen on the DER simulator (see ``Planner``).
 DEFAULT_HEADING_LOOKAHEAD = 0.1
 
+#: Default velocity look-ahead [s]: chosen on the DER simulator (see ``Planner``).
+DEFAULT_VELOCITY_LOOKAHEAD = 1.5
+
 #: Keyword arguments of :class:`Planner` that give the paper's exact cost: eq. 19 at the leaf
 #: with the paper's weights and the heading error against the path tangent.
 PAPER_COST = {"weights": CostWeights(), "heading_lookahead": 0.0, "velocity_lookahead": 0.0,
@@ -125,6 +128,8 @@ class Planner:
     velocity_lookahead : float
         0 (the paper): cost at the predicted leaf pose. > 0 (s): cost at the leaf pose
         extrapolated by its predicted velocities over this time (see :func:`search`).
+        Default 1.5 s (``DEFAULT_VELOCITY_LOOKAHEAD``): the frog side-slips and keeps turning
+        for seconds after a kick, which the pose one period ahead does not show.
     yaw_rate_weight : float
         w_r per rad/s; 0 (the paper) leaves it out. > 0 adds w_r * |predicted yaw rate -
         path curvature * predicted forward speed| at the leaf (see :func:`search`).
@@ -138,7 +143,7 @@ class Planner:
     """
 
     def __init__(self, model, path, weights=CostWeights(), depth=1, heading_lookahead=DEFAULT_HEADING_LOOKAHEAD,
-                 velocity_lookahead=0.0, yaw_rate_weight=0.0):
+                 velocity_lookahead=DEFAULT_VELOCITY_LOOKAHEAD, yaw_rate_weight=0.0):
         if not isinstance(weights, CostWeights):
             weights = CostWeights(*weights)
         depth = int(depth)
@@ -158,6 +163,7 @@ class Planner:
             raise ValueError(f"yaw_rate_weight {yaw_rate_weight} must be a finite number >= 0")
         self.yaw_rate_weight = float(yaw_rate_weight)
         self._progress = 0.0
+        self._previous_pose = None
 
     @property
     def progress(self):
@@ -169,6 +175,7 @@ class Planner:
         if not 0.0 <= progress <= 1.0:
             raise ValueError(f"progress {progress} must be in [0, 1]")
         self._progress = float(progress)
+        self._previous_pose = None
 
     def decide(self, pose, body_velocity):
         """Choose the primitive to execute now (Algorithm 1).
@@ -197,13 +204,15 @@ class Planner:
         result = search(self.model, self.path, pose, body_velocity, self.depth, self.weights, self._progress,
                         self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight)
         first = result.first_action
+        goal = self.path.goal_reached(pose, self._progress, self._previous_pose)
+        self._previous_pose = pose[:2].copy()
         return Decision(
             primitive_id=int(first), name=self.model.primitive_names[first], total_cost=result.total_cost,
             cost_terms=CostTerms.from_array(result.leaf_cost.terms[result.best_leaf]),
             predicted_pose=result.first_poses[first].copy(), progress=self._progress,
             distance_to_path=float(now.distance[0]), current_cost=float(now.total[0]),
             current_cost_terms=CostTerms.from_array(now.terms[0]), sequence=result.sequence,
-            goal_reached=self.path.goal_reached(pose, self._progress),
+            goal_reached=goal,
             yaw_rate_cost=float(result.yaw_rate_cost[result.best_leaf]))
 
     def decide_from_world_state(self, state):

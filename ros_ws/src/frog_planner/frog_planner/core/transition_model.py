@@ -86,7 +86,8 @@ class TransitionModel:
         transitions over the initial states of the whole library. The frog's transitions
         are close to linear in its initial velocities (velocities persist for seconds), so
         this removes most of the error of a sparse library (a nearest neighbour can be
-        ~10 deg/s of yaw rate away) at the cost of one small matrix product.
+        ~10 deg/s of yaw rate away) at the cost of one small matrix product. The evaluator
+        CLI, planner_node and the main job switch it on by default.
 
     Raises
     ------

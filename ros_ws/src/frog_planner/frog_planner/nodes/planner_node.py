@@ -34,14 +34,14 @@ _PARAMS = [
     ("depth", 1, "tree search depth H (1-5; the paper found 1 best on hardware)"),
     ("metric", "euclidean", "nearest-neighbour metric: euclidean (scaled, KD-tree) or relative"),
     ("k_neighbours", 1, "nearest library states averaged"),
-    ("gradient_correction", False, "correct the nearest state's transitions to first order for the "
+    ("gradient_correction", True, "correct the nearest state's transitions to first order for the "
                                    "velocity difference (library-fitted slopes); false = the paper"),
     ("w_distance", 500.0, "eq. 19 weight w_a of the distance to the path"),
     ("w_heading", 50.0, "eq. 19 weight w_b of the heading error"),
     ("w_progress", 300.0, "eq. 19 weight w_c of (1 - progress)"),
     ("heading_lookahead", 0.1, "heading error against the path this far ahead [m]; 0 = the "
                                "paper's path tangent at the closest point"),
-    ("velocity_lookahead", 0.0, "cost each leaf pose extrapolated by its predicted body velocities "
+    ("velocity_lookahead", 1.5, "cost each leaf pose extrapolated by its predicted body velocities "
                                 "and yaw rate over this time [s]; 0 = the paper (cost at the leaf)"),
     ("path_type", "line", "line, sine, ellipse or waypoints"),
     ("path_length", 0.0, "path length/size [m]; 0 = the paper's value for the path type"),
