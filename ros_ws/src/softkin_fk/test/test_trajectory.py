@@ -4,11 +4,13 @@ import pytest
 
 from softkin_fk.core.forward import ForwardSolver
 from softkin_fk.core.models import build_tendon_finger
+from softkin_fk.core.curves import workspace_region
 from softkin_fk.core.trajectory import (curve_flame, curve_L, follow_trajectory, read_waypoints_csv,
                                         sample_configuration_space)
 
 
 def test_builtin_curves_have_documented_size_and_plane():
+    """Dimensions as documented in core/curves.py (placed in the resolution-2 workspace)."""
     L, F = curve_L(), curve_flame()
     assert L.shape == (55, 3) and F.shape == (85, 3)
     assert np.allclose(L[:, 2], 0.0125) and np.allclose(F[:, 2], 0.0125)
@@ -16,7 +18,27 @@ def test_builtin_curves_have_documented_size_and_plane():
     steps = np.linalg.norm(np.diff(L, axis=0), axis=1)
     # uniform in arc length: all steps equal except the chord across the corner
     assert np.sum(~np.isclose(steps, np.median(steps), rtol=1e-9)) == 1
-    assert np.linalg.norm(L[-1] - L[0]) == pytest.approx(np.hypot(0.006, 0.007))
+    assert np.allclose(L[[0, -1]], [[0.098, 0.0625, 0.0125], [0.105, 0.0535, 0.0125]])
+    assert np.min(np.linalg.norm(L[:, :2] - [0.098, 0.0535], axis=1)) < steps.max()  # passes the corner
+    assert np.ptp(F[:, 0]) == pytest.approx(0.006, abs=1e-5) and np.ptp(F[:, 1]) == pytest.approx(0.0094, abs=2e-5)
+    assert (F[:, :2].max(0) + F[:, :2].min(0)) / 2 == pytest.approx([0.099, 0.0575], abs=1e-5)
+
+
+def test_workspace_region_of_a_linear_map():
+    """A linear actuation-to-tip map on [0, 1]^3 has a hexagon (zonotope) as its image: area
+    sum |det(g_i, g_j)| = 2 cm^2; its largest inscribed circle (radius 7.07 mm, half the width
+    across the g3 edges) sits at the centre."""
+    g = np.array([[0.01, 0.0], [0.0, 0.01], [0.005, 0.005]])
+    ax = np.linspace(0, 1, 3)
+    A = np.array(np.meshgrid(ax, ax, ax, indexing='ij')).reshape(3, -1).T
+    rng = np.random.default_rng(0)
+    A = A[rng.permutation(len(A))]                        # any sample order
+    W = workspace_region(A, A @ g, pixel=1e-4)
+    assert W.inside.sum() * 1e-8 == pytest.approx(2e-4, rel=0.03)
+    r, c = W.largest_inscribed_circle()
+    assert r == pytest.approx(0.01 / np.sqrt(2), abs=2e-4)
+    assert np.linalg.norm(c - [0.0075, 0.0075]) < 1e-3
+    assert W.margin(np.array([[0.0075, 0.0075], [0.03, 0.0]])) == pytest.approx([0.01 / np.sqrt(2), 0.0], abs=2e-4)
 
 
 def test_csv_waypoints(tmp_path):

@@ -11,17 +11,8 @@ A waypoint outside the workspace is not reached; IK then returns the nearest poi
 reach, and because each solve starts from the previous one the achieved path stays continuous
 and inside the workspace (Fig. 14).
 
-Built-in curves (the finger's bending plane z = 12.5 mm; metres at the API):
-
-* ``'L'`` (N = 55): from (98, 58) mm down to the corner (98, 51) mm, then to (104, 51) mm,
-  sampled uniformly by arc length (an "L", Fig. 13).
-* ``'flame'`` (N = 85): a closed flame outline centred at (101, 53) mm, about 6 mm wide and
-  9 mm tall, with a pointed top, sampled uniformly in its parameter.
-
-The finger's three cables all run on its upper side, so its workspace is a curved band
-(about 10-15 mm wide) from the rest tip (120, 25) mm up to about (75, 75) mm; both curves lie in
-the band's middle section. Waypoints the finger cannot reach are reported with the nearest
-reachable point (see ``softkin trajectory`` output).
+The built-in curves 'L' (N = 55) and 'flame' (N = 85), waypoint CSV files and the workspace
+they were placed in live in :mod:`softkin_fk.core.curves` (re-exported here).
 """
 from __future__ import annotations
 
@@ -31,78 +22,9 @@ from typing import Callable, List, Optional
 
 import numpy as np
 
+from .curves import CURVES, FINGER_PLANE_Z, MM, curve_flame, curve_L, read_waypoints_csv  # noqa: F401
 from .forward import FKResult, ForwardSolver
 from .inverse import IKResult, solve_ik
-
-MM = 1e-3
-FINGER_PLANE_Z = 12.5 * MM
-
-
-def curve_L(n: int = 55) -> np.ndarray:
-    """The 'L' trajectory: (n, 3) points (m), uniform in arc length."""
-    corners = np.array([[98.0, 58.0], [98.0, 51.0], [104.0, 51.0]]) * MM
-    seg = np.linalg.norm(np.diff(corners, axis=0), axis=1)
-    s = np.linspace(0.0, seg.sum(), n)
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
-    pts = np.empty((n, 2))
-    for i, si in enumerate(s):
-        k = min(np.searchsorted(cum, si, side='right') - 1, len(seg) - 1)
-        u = (si - cum[k]) / seg[k]
-        pts[i] = corners[k] + u * (corners[k + 1] - corners[k])
-    return np.column_stack([pts, np.full(n, FINGER_PLANE_Z)])
-
-
-def curve_flame(n: int = 85) -> np.ndarray:
-    """The 'flame' trajectory: (n, 3) points (m) of a closed flame outline."""
-    t = np.linspace(0.0, 2 * np.pi, n)
-    # a teardrop: round bottom, pointed top (flame tip at t = pi / 2)
-    w = 2.5 * np.cos(t) * (1 - 0.5 * (np.sin(t) > 0) * np.sin(t) ** 2)
-    h = 4.0 * np.sin(t) - 0.7 * np.sin(3 * t)
-    pts = np.column_stack([101.0 + 1.2 * w, 53.0 + h]) * MM
-    return np.column_stack([pts, np.full(n, FINGER_PLANE_Z)])
-
-
-CURVES = {'L': curve_L, 'flame': curve_flame}
-
-
-def read_waypoints_csv(path: str, scale: float = 1.0) -> np.ndarray:
-    """Waypoints from a CSV file with columns x, y[, z] (header optional).
-
-    Parameters
-    ----------
-    path : str
-    scale : float
-        Factor to metres (0.001 for millimetres). Missing z is the finger plane.
-
-    Returns
-    -------
-    ndarray, shape (n, 3)
-
-    Raises
-    ------
-    ValueError
-        If the file has fewer than 2 columns or no rows.
-    """
-    rows = []
-    with open(path) as fh:
-        for k, line in enumerate(fh):
-            line = line.strip()
-            if not line or line.startswith('#'):
-                continue
-            parts = [p for p in line.replace(';', ',').split(',') if p.strip() != '']
-            try:
-                vals = [float(p) for p in parts]
-            except ValueError:
-                if k == 0:
-                    continue  # header
-                raise ValueError(f"{path}: line {k + 1} is not numeric: {line!r}")
-            if len(vals) < 2:
-                raise ValueError(f"{path}: line {k + 1} has {len(vals)} columns, expected x, y[, z]")
-            rows.append(vals[:3])
-    if not rows:
-        raise ValueError(f"{path}: no waypoints found")
-    out = np.array([r + [FINGER_PLANE_Z / scale] if len(r) == 2 else r for r in rows], float) * scale
-    return out
 
 
 @dataclasses.dataclass
