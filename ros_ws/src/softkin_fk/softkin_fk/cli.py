@@ -13,6 +13,14 @@ Examples
   softkin trajectory --csv waypoints.csv --csv-scale 0.001
   softkin calibrate --ratios 3.75 5.68                # Table II analogue
   softkin convergence --resolutions 1 2 3             # tip vs mesh resolution (Fig. 17)
+  softkin workspace --ik-every 5                      # finger workspace + built-in curves (PNG)
+
+Your own mesh (gmsh .msh, .vtu, .mesh, ... or TetGen .node/.ele) with a JSON spec sidecar
+(units, R_w per region, fixed vertices, actuators, markers; see softkin_fk/core/mesh_spec.py
+and examples/finger_mm.json):
+  softkin fk --mesh part.msh --spec part.json --actuation 0.9 --out runs/x
+  softkin ik --mesh part.msh --spec part.json --target-mm 100 54 12.5 --marker tip
+  softkin export --model pneumatic --mesh-out pneu.msh  # a built-in model as mesh + spec
 """
 from __future__ import annotations
 
@@ -34,13 +42,37 @@ class CliError(Exception):
 # --- helpers ----------------------------------------------------------------------------------
 def _build_model(args):
     from .core import models
-    if args.model == 'finger':
+    if getattr(args, 'mesh', None) or getattr(args, 'spec', None):
+        return _load_user_mesh(args)
+    if args.model in (None, 'finger'):
         return models.build_tendon_finger(resolution=args.resolution)
     if args.model == 'pneumatic':
         return models.build_pneumatic_actuator(resolution=args.resolution)
     if args.model == 'dea':
         return models.build_dea_crawler(resolution=args.resolution)
     raise CliError(f"unknown model {args.model!r}; expected finger, pneumatic or dea")
+
+
+def _load_user_mesh(args):
+    from .core.mesh_spec import MeshSpecError, load_mesh_with_spec
+    if not args.mesh:
+        raise CliError("--spec needs --mesh (the mesh file it describes)")
+    if not args.spec:
+        raise CliError(f"--mesh {args.mesh} needs --spec: a JSON file with units, fixed vertices, actuators "
+                       "and markers (see examples/finger_mm.json)")
+    if args.model not in (None, 'finger'):
+        raise CliError("give either --model or --mesh/--spec, not both")
+    try:
+        return load_mesh_with_spec(args.mesh, args.spec)
+    except (MeshSpecError, FileNotFoundError) as exc:
+        raise CliError(str(exc))
+
+
+def _marker(mesh, name):
+    if name not in mesh.markers:
+        raise CliError(f"the mesh has no marker {name!r}; markers: {sorted(mesh.markers) or 'none'} "
+                       "(add it under 'markers' in the spec)")
+    return name
 
 
 def _actuation(mesh, args):
@@ -130,8 +162,11 @@ def cmd_fk(args):
     fig.savefig(os.path.join(out, 'deformed.png'), dpi=120)
     if args.mesh_out:
         write_volume_mesh(args.mesh_out, mesh, res.positions)
-    print(json.dumps(dict(tip_m=res.positions[mesh.markers['tip']].tolist(), iterations=res.iterations,
-                          converged=res.converged, out=out)))
+    summary = dict(iterations=res.iterations, converged=res.converged, out=out)
+    if 'tip' in mesh.markers:
+        summary = dict(tip_m=res.positions[mesh.markers['tip']].tolist(), **summary)
+    summary['markers_m'] = {k: res.positions[v].tolist() for k, v in mesh.markers.items()}
+    print(json.dumps(summary))
     return 0
 
 
@@ -139,11 +174,13 @@ def cmd_ik(args):
     from .core.forward import ForwardSolver
     from .core.inverse import solve_ik
     mesh = _build_model(args)
+    marker = _marker(mesh, args.marker)
     target = np.asarray(args.target_mm, float) * MM
     fs = ForwardSolver(mesh)
     t0 = time.perf_counter()
     try:
-        res = solve_ik(fs, target, lam=args.lam_mm * MM, i_max=args.i_max, direction=args.direction)
+        res = solve_ik(fs, target, markers=(marker,), lam=args.lam_mm * MM, i_max=args.i_max,
+                       direction=args.direction)
     except ValueError as exc:
         raise CliError(str(exc))
     elapsed = time.perf_counter() - t0
@@ -173,8 +210,9 @@ def cmd_trajectory(args):
     from .core.forward import ForwardSolver
     from .core.trajectory import CURVES, follow_trajectory, read_waypoints_csv, sample_configuration_space
     mesh = _build_model(args)
-    if mesh.info.get('model') != 'tendon_finger':
-        raise CliError("trajectory following is set up for the finger model (marker 'tip')")
+    marker = _marker(mesh, args.marker)
+    if mesh.info.get('model') != 'tendon_finger' and not args.csv:
+        raise CliError("the built-in curves lie in the finger's workspace; give --csv waypoints for other robots")
     if args.csv:
         if not os.path.exists(args.csv):
             raise CliError(f"waypoint file {args.csv!r} not found")
@@ -192,11 +230,12 @@ def cmd_trajectory(args):
     t0 = time.perf_counter()
     n_s = args.samples ** len(mesh.actuators)
     with tqdm(total=n_s, desc='configuration space', disable=args.quiet) as bar:
-        cs = sample_configuration_space(fs, args.samples, progress=bar.update)
+        cs = sample_configuration_space(fs, args.samples, marker=marker, progress=bar.update)
     t_cs = time.perf_counter() - t0
     t1 = time.perf_counter()
     with tqdm(total=len(P), desc=f'trajectory {name}', disable=args.quiet) as bar:
-        tr = follow_trajectory(fs, P, cs, progress=bar.update, lam=args.lam_mm * MM, direction=args.direction)
+        tr = follow_trajectory(fs, P, cs, marker=marker, progress=bar.update, lam=args.lam_mm * MM,
+                               direction=args.direction)
     t_tr = time.perf_counter() - t1
     out = _outdir(args, f'trajectory_{name}')
     _write_json(os.path.join(out, 'result.json'), dict(
@@ -285,21 +324,128 @@ def cmd_convergence(args):
     return 0
 
 
+def cmd_export(args):
+    from .core.mesh_spec import MeshSpecError, export_mesh_with_spec
+    mesh = _build_model(args)
+    d = os.path.dirname(os.path.abspath(args.mesh_out))
+    os.makedirs(d, exist_ok=True)
+    try:
+        export_mesh_with_spec(mesh, args.mesh_out, args.spec_out, units=args.units)
+    except MeshSpecError as exc:
+        raise CliError(str(exc))
+    spec = args.spec_out or os.path.splitext(args.mesh_out)[0] + '.json'
+    print(json.dumps(dict(mesh=args.mesh_out, spec=spec, n_vertices=mesh.n_vertices,
+                          groups=[g.name for g in mesh.groups], actuators=[a.name for a in mesh.actuators])))
+    return 0
+
+
+def cmd_workspace(args):
+    from tqdm import tqdm
+
+    from .core.curves import CURVES, workspace_region
+    from .core.forward import ForwardSolver
+    from .core.inverse import solve_ik
+    from .core.trajectory import sample_configuration_space
+    mesh = _build_model(args)
+    if mesh.info.get('model') != 'tendon_finger':
+        raise CliError("the workspace picture is for the finger (planar, bending in x-y)")
+    for c in args.curves:
+        if c not in CURVES:
+            raise CliError(f"unknown curve {c!r}; built-in curves: {sorted(CURVES)}")
+    if args.samples < 2:
+        raise CliError(f"--samples {args.samples} must be >= 2")
+    fs = ForwardSolver(mesh)
+    t0 = time.perf_counter()
+    n_s = args.samples ** len(mesh.actuators)
+    with tqdm(total=n_s, desc='configuration space', disable=args.quiet) as bar:
+        cs = sample_configuration_space(fs, args.samples, progress=bar.update)
+    t_cs = time.perf_counter() - t0
+    region = workspace_region(cs.actuations, cs.points)
+    r_in, c_in = region.largest_inscribed_circle()
+    lam = args.lam_mm * MM
+    curves = {}
+    for name in args.curves:
+        P = CURVES[name]()
+        m = region.margin(P)
+        row = dict(n=len(P), min_margin_m=float(m.min()), margins_m=m, waypoints=P)
+        if args.ik_every > 0:
+            idx = np.arange(0, len(P), args.ik_every)
+            errs, its, reached = [], [], []
+            for i in tqdm(idx, desc=f'IK {name}', disable=args.quiet):
+                k = cs.nearest(P[i])  # independent solves: no warm start from the previous waypoint
+                r = solve_ik(fs, P[i], initial=cs.actuations[k], initial_fk=cs.results[k], lam=lam,
+                             direction='gauss-newton')
+                errs.append(r.error)
+                its.append(r.iterations)
+                reached.append(r.reached[0])
+            errs = np.array(errs)
+            row.update(ik_indices=idx, ik_errors_m=errs, ik_iterations=np.array(its), ik_reached=np.array(reached),
+                       ik_max_error_m=float(errs.max()), ik_all_within_lambda=bool(np.all(errs <= lam)))
+        curves[name] = row
+    out = _outdir(args, 'workspace')
+    _write_json(os.path.join(out, 'result.json'), dict(
+        resolution=mesh.info.get('resolution'), samples_per_axis=args.samples, config_space_seconds=t_cs,
+        config_space_points=cs.points, config_space_actuations=cs.actuations, inscribed_radius_m=r_in,
+        inscribed_centre_m=c_in, lam_m=lam, curves=curves, units='m'))
+    plt = _figure()
+    fig, ax = plt.subplots(figsize=(7, 7))
+    ax.contourf(region.xs / MM, region.ys / MM, region.distance.T / MM, levels=[1e-9, 1, 2, 3, 4, 5, 6, 8],
+                cmap='Greens', alpha=0.6)
+    ax.contour(region.xs / MM, region.ys / MM, region.inside.T.astype(float), levels=[0.5], colors='g',
+               linewidths=0.8)
+    ax.plot(cs.points[:, 0] / MM, cs.points[:, 1] / MM, '.', color='0.4', ms=2, label=f'{n_s} FK samples')
+    for (name, row), col in zip(curves.items(), ('r', 'b', 'm', 'c')):
+        P = row['waypoints']
+        ax.plot(P[:, 0] / MM, P[:, 1] / MM, '.-', color=col, ms=3, lw=0.8,
+                label=f"'{name}' (N = {row['n']}), margin >= {row['min_margin_m'] / MM:.1f} mm")
+        if 'ik_reached' in row:
+            R = row['ik_reached']
+            ax.plot(R[:, 0] / MM, R[:, 1] / MM, 'kx', ms=5,
+                    label=f"IK every {args.ik_every}th: max error {row['ik_max_error_m'] / MM:.3f} mm")
+    ax.set_aspect('equal')
+    ax.set_xlabel('x (mm)')
+    ax.set_ylabel('y (mm)')
+    ax.legend(fontsize=7, loc='lower left')
+    ax.set_title(f"finger tip workspace (resolution {mesh.info.get('resolution')}; shading: distance to the "
+                 "boundary, 1 mm steps)", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, 'curves_workspace.png'), dpi=130)
+    summary = dict(out=out, config_space_s=t_cs, inscribed_radius_mm=r_in / MM)
+    for name, row in curves.items():
+        summary[name] = dict(min_margin_mm=row['min_margin_m'] / MM)
+        if 'ik_errors_m' in row:
+            summary[name].update(ik_waypoints=len(row['ik_errors_m']), ik_max_error_mm=row['ik_max_error_m'] / MM,
+                                 ik_all_within_lambda=row['ik_all_within_lambda'])
+    print(json.dumps(summary))
+    return 0
+
+
 def build_parser():
     p = argparse.ArgumentParser(prog='softkin', description=__doc__.split('\n')[0],
                                 epilog=__doc__.split('Examples\n--------\n')[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest='command', required=True)
 
-    def common(sp, name):
-        sp.add_argument('--model', default='finger', help='finger (default), pneumatic or dea')
+    def common(sp, name, user_mesh=True):
+        sp.add_argument('--model', default=None, help='finger (default), pneumatic or dea')
+        if user_mesh:
+            sp.add_argument('--mesh', default=None,
+                            help='your own volume mesh instead of --model: .msh, .vtu, .vtk, .mesh, ... '
+                                 '(meshio) or TetGen .node/.ele; needs --spec')
+            sp.add_argument('--spec', default=None,
+                            help='JSON spec of --mesh: units, R_w regions, fixed vertices, actuators, markers '
+                                 '(see examples/finger_mm.json)')
         sp.add_argument('--resolution', type=int, default=None,
                         help='mesh resolution of the model (finger: cells per 5 mm; default from models.py)')
         sp.add_argument('--out', default=None, help=f'output folder (default runs/softkin/{name})')
         sp.add_argument('--quiet', action='store_true', help='no progress bars')
 
-    sp = sub.add_parser('fk', help='forward kinematics of an actuation',
-                        epilog='example: softkin fk --pull-mm 2 3 4')
+    raw = argparse.RawDescriptionHelpFormatter
+    sp = sub.add_parser('fk', help='forward kinematics of an actuation', formatter_class=raw,
+                        epilog='examples:\n  softkin fk --pull-mm 2 3 4\n'
+                               '  softkin fk --model pneumatic --actuation 1.5 1 1\n'
+                               '  softkin fk --mesh part.msh --spec part.json --actuation 0.9 --out runs/x\n'
+                               '  softkin fk --mesh body.node --spec body.json --actuation 2.0   # TetGen')
     common(sp, 'fk')
     sp.add_argument('--actuation', type=float, nargs='+',
                     help='actuation ratios (cable s, pneumatic alpha, DEA lambda)')
@@ -309,9 +455,11 @@ def build_parser():
     sp.add_argument('--mesh-out', default=None, help='also write the deformed mesh (meshio format by extension)')
     sp.set_defaults(func=cmd_fk)
 
-    sp = sub.add_parser('ik', help='inverse kinematics for a tip target (Algorithm 2)',
-                        epilog='example: softkin ik --target-mm 100 54 12.5')
+    sp = sub.add_parser('ik', help='inverse kinematics for a tip target (Algorithm 2)', formatter_class=raw,
+                        epilog='examples:\n  softkin ik --target-mm 100 54 12.5\n'
+                               '  softkin ik --mesh part.msh --spec part.json --target-mm 100 54 12.5 --marker tip')
     common(sp, 'ik')
+    sp.add_argument('--marker', default='tip', help="tracked marker (default 'tip')")
     sp.add_argument('--target-mm', type=float, nargs=3, required=True, help='target tip position x y z (mm)')
     sp.add_argument('--lam-mm', type=float, default=0.2, help='stop when the tip error <= this (mm), default 0.2')
     sp.add_argument('--i-max', type=int, default=30, help='iteration limit, default 30')
@@ -322,6 +470,7 @@ def build_parser():
     sp = sub.add_parser('trajectory', help='trajectory following (Algorithm 3)',
                         epilog='examples: softkin trajectory --curve flame; softkin trajectory --csv pts.csv')
     common(sp, 'trajectory')
+    sp.add_argument('--marker', default='tip', help="tracked marker (default 'tip')")
     sp.add_argument('--curve', default='L', help="built-in curve: 'L' (N=55) or 'flame' (N=85)")
     sp.add_argument('--n', type=int, default=None, help='number of waypoints (default: the curve\'s N)')
     sp.add_argument('--csv', default=None, help='waypoints file: x,y[,z] per line')
@@ -330,6 +479,31 @@ def build_parser():
     sp.add_argument('--lam-mm', type=float, default=0.2, help='IK threshold (mm)')
     sp.add_argument('--direction', default='gauss-newton', choices=['gradient', 'gauss-newton'])
     sp.set_defaults(func=cmd_trajectory)
+
+    sp = sub.add_parser('workspace', help="finger tip workspace with the built-in curves (PNG) and an IK check",
+                        formatter_class=raw,
+                        epilog='examples:\n  softkin workspace                 # 7^3 samples, curves_workspace.png\n'
+                               '  softkin workspace --ik-every 5    # + IK on every 5th waypoint of each curve')
+    common(sp, 'workspace', user_mesh=False)
+    sp.add_argument('--samples', type=int, default=7, help='samples per cable (default 7: 343 FK solves)')
+    sp.add_argument('--curves', nargs='+', default=['L', 'flame'], help="curves to overlay (default: L flame)")
+    sp.add_argument('--ik-every', type=int, default=0,
+                    help='run IK (from the nearest sample) on every k-th waypoint of each curve; 0 = no IK')
+    sp.add_argument('--lam-mm', type=float, default=0.2, help='IK threshold (mm)')
+    sp.set_defaults(func=cmd_workspace)
+
+    sp = sub.add_parser('export', help='write a built-in model as a mesh file + JSON spec (a template)',
+                        formatter_class=raw,
+                        epilog='examples:\n'
+                               '  softkin export --model finger --resolution 1 --mesh-out finger.msh --units mm\n'
+                               '  softkin export --model pneumatic --mesh-out pneu.node   # TetGen + region attributes')
+    sp.add_argument('--model', default=None, help='finger (default), pneumatic or dea')
+    sp.add_argument('--resolution', type=int, default=None, help='mesh resolution of the model')
+    sp.add_argument('--mesh-out', required=True,
+                    help='mesh file: .msh (gmsh 2.2), .vtu, .mesh, ... or .node (TetGen, tetrahedra only)')
+    sp.add_argument('--spec-out', default=None, help='spec file (default: mesh path with .json)')
+    sp.add_argument('--units', default='m', help='units of the written coordinates and spec lengths (default m)')
+    sp.set_defaults(func=cmd_export)
 
     sp = sub.add_parser('calibrate', help='R_w calibration of two-material bars (eq. 16, Table II)')
     sp.add_argument('--ratios', type=float, nargs='+', default=[3.75, 5.68], help='elasticity ratios R_m')
@@ -351,7 +525,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if getattr(args, 'resolution', 'x') is None:
         from .core.models import DEFAULT_FINGER_RESOLUTION
-        args.resolution = DEFAULT_FINGER_RESOLUTION if args.model == 'finger' else 1
+        args.resolution = DEFAULT_FINGER_RESOLUTION if args.model in (None, 'finger') else 1
     try:
         return args.func(args)
     except CliError as exc:

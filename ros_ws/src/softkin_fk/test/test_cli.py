@@ -28,3 +28,23 @@ def test_bad_input_gives_error_and_exit_2(tmp_path, capsys):
     assert rc == 2 and 'not found' in capsys.readouterr().err
     rc = main(['calibrate', '--ratios', '0.7', '--out', str(tmp_path)])
     assert rc == 2 and 'must exceed 1' in capsys.readouterr().err
+
+
+def test_help_shows_user_mesh_examples(capsys):
+    for argv in (['--help'], ['fk', '--help']):
+        try:
+            main(argv)
+        except SystemExit as exc:
+            assert exc.code == 0
+        out = capsys.readouterr().out
+        assert '--mesh part.msh --spec part.json --actuation 0.9' in out
+
+
+def test_fk_mesh_out_writes_a_gmsh_file_meshio_reads(tmp_path):
+    import meshio
+    path = tmp_path / 'deformed.msh'
+    rc = main(['fk', '--resolution', '1', '--pull-mm', '1', '1', '2', '--out', str(tmp_path), '--quiet',
+               '--mesh-out', str(path)])
+    assert rc == 0
+    m = meshio.read(str(path))
+    assert sorted({c.type for c in m.cells}) == ['tetra', 'triangle'] and len(m.points) == 450

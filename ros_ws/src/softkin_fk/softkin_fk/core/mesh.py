@@ -14,7 +14,9 @@ Prism vertex order is ``(t0, t1, t2, b0, b1, b2)``: a top triangle and the botto
 below it. Cable triangles are ``(a, b, apex)`` with the cable running from ``a`` to ``b``.
 
 I/O goes through meshio (any volume format it reads: .msh, .vtu, .vtk, .mesh, ...) and a
-small reader/writer for TetGen ``.node``/``.ele`` files.
+small reader/writer for TetGen ``.node``/``.ele`` files (with region attributes). A user's mesh
+with its element groups, actuators, fixed vertices and markers loads from a mesh file plus a
+JSON spec with :func:`softkin_fk.core.mesh_spec.load_mesh_with_spec`.
 """
 from __future__ import annotations
 
@@ -253,13 +255,15 @@ def element_measures(x: np.ndarray, group: ElementGroup) -> np.ndarray:
 
 
 # --- I/O ------------------------------------------------------------------------------------
-def read_tetgen(basename: str) -> tuple:
+def read_tetgen(basename: str, return_attributes: bool = False) -> tuple:
     """Read TetGen ``basename.node`` and ``basename.ele``.
 
     Parameters
     ----------
     basename : str
         Path without extension.
+    return_attributes : bool
+        Also return the first element attribute (TetGen's region number, ``-A``).
 
     Returns
     -------
@@ -267,6 +271,13 @@ def read_tetgen(basename: str) -> tuple:
         Positions in the file's units.
     tets : ndarray of int, shape (n_t, 4)
         Zero-based vertex indices.
+    attributes : ndarray of int, shape (n_t,), or None
+        Only with ``return_attributes``; None when the .ele file has no attribute column.
+
+    Raises
+    ------
+    ValueError
+        Malformed header, wrong dimension or nodes per element, missing node ids or rows.
     """
     def rows(path):
         out = []
@@ -278,35 +289,56 @@ def read_tetgen(basename: str) -> tuple:
         return out
 
     node_rows = rows(basename + '.node')
+    if not node_rows:
+        raise ValueError(f"{basename}.node is empty")
     n, dim = int(node_rows[0][0]), int(node_rows[0][1])
     if dim != 3:
         raise ValueError(f"{basename}.node has dimension {dim}, expected 3")
+    if len(node_rows) < 1 + n:
+        raise ValueError(f"{basename}.node announces {n} nodes but holds {len(node_rows) - 1}")
     nodes = np.array([[float(v) for v in r[:4]] for r in node_rows[1:1 + n]])
     ids = nodes[:, 0].astype(np.int64)
     verts = nodes[:, 1:4]
     ele_rows = rows(basename + '.ele')
+    if not ele_rows:
+        raise ValueError(f"{basename}.ele is empty")
     ne, npe = int(ele_rows[0][0]), int(ele_rows[0][1])
+    n_attr = int(ele_rows[0][2]) if len(ele_rows[0]) > 2 else 0
     if npe not in (4, 10):
         raise ValueError(f"{basename}.ele has {npe} nodes per element, expected 4 (or 10)")
+    if len(ele_rows) < 1 + ne:
+        raise ValueError(f"{basename}.ele announces {ne} elements but holds {len(ele_rows) - 1}")
     ele = np.array([[int(v) for v in r[1:5]] for r in ele_rows[1:1 + ne]], dtype=np.int64)
+    attr = None
+    if n_attr > 0:
+        attr = np.array([int(round(float(r[1 + npe]))) for r in ele_rows[1:1 + ne]], dtype=np.int64)
     lookup = np.full(ids.max() + 1, -1, np.int64)
     lookup[ids] = np.arange(n)
+    if ele.min() < 0 or ele.max() > ids.max():
+        raise ValueError(f"{basename}.ele references node ids missing from {basename}.node")
     tets = lookup[ele]
     if np.any(tets < 0):
         raise ValueError(f"{basename}.ele references node ids missing from {basename}.node")
+    if return_attributes:
+        return verts, tets, attr
     return verts, tets
 
 
-def write_tetgen(basename: str, vertices: np.ndarray, tets: np.ndarray) -> None:
-    """Write TetGen ``basename.node``/``basename.ele`` (zero-based ids)."""
+def write_tetgen(basename: str, vertices: np.ndarray, tets: np.ndarray,
+                 attributes: Optional[np.ndarray] = None) -> None:
+    """Write TetGen ``basename.node``/``basename.ele`` (zero-based ids).
+
+    ``attributes`` (n_t,) ints, if given, become the element attribute (region number).
+    """
     with open(basename + '.node', 'w') as fh:
         fh.write(f"{len(vertices)} 3 0 0\n")
         for i, v in enumerate(vertices):
             fh.write(f"{i} {v[0]:.17g} {v[1]:.17g} {v[2]:.17g}\n")
     with open(basename + '.ele', 'w') as fh:
-        fh.write(f"{len(tets)} 4 0\n")
+        fh.write(f"{len(tets)} 4 {0 if attributes is None else 1}\n")
         for i, t in enumerate(tets):
-            fh.write(f"{i} {t[0]} {t[1]} {t[2]} {t[3]}\n")
+            extra = '' if attributes is None else f" {int(attributes[i])}"
+            fh.write(f"{i} {t[0]} {t[1]} {t[2]} {t[3]}{extra}\n")
 
 
 def read_volume_mesh(path: str, scale: float = 1.0, shape_parameter: float = 1.0,
@@ -374,7 +406,12 @@ def write_volume_mesh(path: str, mesh: SoftMesh, positions: Optional[np.ndarray]
     ctype = {3: 'triangle', 4: 'tetra', 6: 'wedge'}
     cells = [(ctype[g.k], g.elements) for g in mesh.groups]
     data = {'group': [np.full(len(g.elements), i, np.int32) for i, g in enumerate(mesh.groups)]}
-    meshio.write(path, meshio.Mesh(x, cells, cell_data=data))
+    m = meshio.Mesh(x, cells, cell_data=data)
+    if path.endswith('.msh'):  # gmsh 4.1 (meshio's default) needs entity tags for mixed cell types
+        data = {'gmsh:physical': data['group'], 'gmsh:geometrical': data['group']}
+        meshio.write(path, meshio.Mesh(x, cells, cell_data=data), file_format='gmsh22', binary=False)
+    else:
+        meshio.write(path, m)
 
 
 def orient_tets(mesh: SoftMesh) -> None:
