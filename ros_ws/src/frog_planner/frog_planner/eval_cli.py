@@ -13,6 +13,7 @@ EPILOG = """examples:
   frog-planner-eval --library LIB --compare --out runs/compare     # depths 1-3 x both metrics
   frog-planner-eval --library LIB --path line --lateral-offset 0.05 --out runs/offset
   frog-planner-eval --library LIB --compare --paper-cost --out runs/paper   # the paper's exact eq. 19
+  frog-planner-eval --library LIB --path ellipse --transitions simulator --out runs/oracle  # exact predictions
 
 Writes per run <path>_d<depth>_<metric>.{json,png,npz} (Fig. 5d-g and S3 style plots) and
 a metrics.json summary into --out.
@@ -32,7 +33,8 @@ def _run(args, path_name, depth, metric, model_cache):
                           weights=CostWeights(args.w_a, args.w_b, args.w_c),
                           start_offset=(0.0, args.lateral_offset, 0.0), max_time=args.max_time,
                           heading_lookahead=args.heading_lookahead,
-                          velocity_lookahead=args.velocity_lookahead, yaw_rate_weight=args.w_r)
+                          velocity_lookahead=args.velocity_lookahead, yaw_rate_weight=args.w_r,
+                          transitions=args.transitions)
     files = save_result(res, args.out)
     m = res.metrics
     print(f"{path_name:8s} depth {depth} {metric:9s}: goal {'yes' if m['goal_reached'] else 'NO '} "
@@ -67,6 +69,9 @@ def main(argv=None) -> int:
                          "(default 1.5; 0 = paper: cost at the predicted pose)")
     ap.add_argument("--w-r", type=float, default=0.0,
                     help="weight per rad/s of |yaw rate - path curvature x speed| at the leaf (0 = paper)")
+    ap.add_argument("--transitions", choices=["library", "simulator"], default="library",
+                    help="predictions of the search: the library (paper) or exact ones from copies of the "
+                         "running simulator (depth <= 2; about 9^depth simulated periods per decision)")
     ap.add_argument("--lateral-offset", type=float, default=0.0, help="start offset left of the path [m]")
     ap.add_argument("--max-time", type=float, default=None, help="give up after [s]")
     ap.add_argument("--compare", action="store_true", help="depths 1-3 x both metrics on every path")
@@ -78,8 +83,12 @@ def main(argv=None) -> int:
         args.gradient_correction = False
     from frog_planner.core.library_file import LibraryFormatError
     paths = ["line", "sine", "ellipse"] if args.path == "all" or args.compare else [args.path]
-    runs = ([(p, d, m) for m in ("euclidean", "relative") for d in (1, 2, 3) for p in paths]
-            if args.compare else [(p, args.depth, args.metric) for p in paths])
+    if args.compare and args.transitions == "simulator":
+        runs = [(p, d, args.metric) for d in (1, 2) for p in paths]
+    elif args.compare:
+        runs = [(p, d, m) for m in ("euclidean", "relative") for d in (1, 2, 3) for p in paths]
+    else:
+        runs = [(p, args.depth, args.metric) for p in paths]
     cache: dict = {}
     try:
         results = [_run(args, *r, cache) for r in runs]

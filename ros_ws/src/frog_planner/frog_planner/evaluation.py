@@ -8,6 +8,8 @@ primitive, and the simulator executes it for T seconds.
 
 from __future__ import annotations
 
+import copy
+import itertools
 import json
 import time
 from collections import Counter
@@ -23,6 +25,48 @@ from frog_planner.core.transition_model import TransitionModel
 from frog_planner.core.tree_search import CostWeights
 
 PATHS = {"line": line_path, "sine": sinusoid_path, "ellipse": ellipse_path}
+
+#: Where the search's predictions come from: the motion library (the paper) or the simulator.
+TRANSITION_SOURCES = ("library", "simulator")
+
+#: Deepest tree the simulator source expands (9^2 = 81 simulated periods per decision).
+MAX_SIMULATOR_DEPTH = 2
+
+
+def simulator_expander(sim, period: float, n_primitives: int = 9):
+    """A tree expander that asks the simulator itself (the paper's suggested comparison,
+    "a planner that queries the DER simulation itself for transitions in the loop").
+
+    Each sequence is run on a copy of ``sim`` in its *full* current state (limb shapes and
+    node velocities included), so the predictions are exact for this simulated robot: what
+    remains of a tracking error is the planner's cost and horizon, not the library.
+
+    Returns
+    -------
+    callable
+        ``expander(pose, body_velocity, depth)`` for :func:`frog_planner.core.tree_search.search`
+        (pose and velocity are ignored: the simulator's own state is used).
+    """
+    steps = int(round(period / sim.time_step))
+
+    def expander(pose, body_velocity, depth):
+        if not 1 <= depth <= MAX_SIMULATOR_DEPTH:
+            raise ValueError(f"simulator transitions support depth 1-{MAX_SIMULATOR_DEPTH}, not {depth}")
+        leaves, velocities, first = [], [], {}
+        for seq in itertools.product(range(n_primitives), repeat=depth):
+            # share the (read-only) actuation library instead of copying it for every branch
+            branch = copy.deepcopy(sim, memo={id(sim.library): sim.library})
+            for level, prim in enumerate(seq):
+                branch.execute_primitive(prim)
+                branch.step(steps)
+                st = branch.rigid_body_state()
+                if level == 0 and prim not in first:
+                    first[prim] = [st.com[0], st.com[1], st.heading]
+            leaves.append([st.com[0], st.com[1], st.heading])
+            velocities.append([st.body_velocity[0], st.body_velocity[1], st.yaw_rate])
+        return (np.array(leaves), np.array([first[p] for p in range(n_primitives)]), np.array(velocities))
+
+    return expander
 
 
 @dataclass
@@ -44,7 +88,7 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
                     heading_lookahead: float = DEFAULT_HEADING_LOOKAHEAD,
                     velocity_lookahead: float = DEFAULT_VELOCITY_LOOKAHEAD,
                     yaw_rate_weight: float = 0.0,
-                    simulation=None) -> ClosedLoopResult:
+                    simulation=None, transitions: str = "library") -> ClosedLoopResult:
     """Follow ``path`` with the simulated frog until the goal or ``max_time``.
 
     Parameters
@@ -74,6 +118,9 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
         w_r per rad/s of |predicted yaw rate - path curvature * forward speed| (0 = the paper).
     simulation : FrogSimulation, optional
         Reuse a simulator (it is reset).
+    transitions : {'library', 'simulator'}
+        Predictions of the search: the motion library (the paper) or exact ones from copies
+        of the running simulator (:func:`simulator_expander`; depth <= 2, slow).
 
     Returns
     -------
@@ -88,8 +135,11 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     c, s = np.cos(h0), np.sin(h0)
     x0 = path.points[0] + start_offset[0] * np.array([c, s]) + start_offset[1] * np.array([-s, c])
     sim.set_pose(float(x0[0]), float(x0[1]), h0 + start_offset[2])
+    if transitions not in TRANSITION_SOURCES:
+        raise ValueError(f"transitions {transitions!r} unknown; expected one of {TRANSITION_SOURCES}")
+    expander = simulator_expander(sim, period, model.n_primitives) if transitions == "simulator" else None
     planner = Planner(model, path, weights, depth, heading_lookahead=heading_lookahead,
-                      velocity_lookahead=velocity_lookahead, yaw_rate_weight=yaw_rate_weight)
+                      velocity_lookahead=velocity_lookahead, yaw_rate_weight=yaw_rate_weight, expander=expander)
     max_time = max_time or path.length / 0.005
     stride = int(round(sample_interval / sim.time_step))
     steps_per_period = int(round(period / sim.time_step))
@@ -138,7 +188,8 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     end = goal_time if goal_time is not None else float(t[-1])
     metrics = {
         "path": path.name, "path_length_m": path.length, "depth": depth, "period_s": period,
-        "metric": model.metric, "k_neighbours": model.k,
+        "transitions": transitions, "metric": model.metric if transitions == "library" else "exact",
+        "k_neighbours": model.k,
         "gradient_correction": model.gradient_correction, "heading_lookahead_m": heading_lookahead,
         "velocity_lookahead_s": velocity_lookahead, "yaw_rate_weight": yaw_rate_weight,
         "weights": [weights.distance, weights.heading, weights.progress],

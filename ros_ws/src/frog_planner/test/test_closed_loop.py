@@ -90,3 +90,21 @@ def test_follows_a_right_hand_arc(library):
     assert swept.max() >= 0.95 * ARC_ANGLE, f"got only {swept.max() / ARC_ANGLE:.0%} along the arc"
     assert d.mean() <= 0.035 and d.max() <= 0.09, (d.mean(), d.max())
     assert res.metrics["primitives_used"].get("E", 0) > res.metrics["primitives_used"].get("F", 0)
+
+
+def test_simulator_transitions_predict_the_next_pose_exactly(library):
+    """With ``transitions='simulator'`` the search runs each primitive on a copy of the
+    running simulator, so the pose it predicts for the chosen primitive must be the pose the
+    robot then reaches, to round-off (the simulator is deterministic); the library's
+    prediction of the same step is only approximate (it ignores the limbs' state)."""
+    model = TransitionModel.load(library, period=PERIOD, gradient_correction=True)
+    path = line_path(length=0.30)
+    res = run_closed_loop(path, model, depth=1, period=PERIOD, max_time=4.0, transitions="simulator",
+                          start_offset=(0.0, 0.02, 0.0), sample_interval=PERIOD)
+    assert len(res.decisions) >= 3
+    assert res.metrics["transitions"] == "simulator" and res.metrics["metric"] == "exact"
+    for k, dec in enumerate(res.decisions[:-1]):
+        reached = res.pose[k + 1]
+        assert np.abs(np.asarray(dec["predicted_pose"]) - reached).max() < 1e-9, (k, dec["predicted_pose"], reached)
+    with pytest.raises(ValueError, match="depth 1-2"):
+        run_closed_loop(path, model, depth=3, period=PERIOD, max_time=2.0, transitions="simulator")

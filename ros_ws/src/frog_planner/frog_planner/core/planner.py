@@ -133,6 +133,9 @@ class Planner:
     yaw_rate_weight : float
         w_r per rad/s; 0 (the paper) leaves it out. > 0 adds w_r * |predicted yaw rate -
         path curvature * predicted forward speed| at the leaf (see :func:`search`).
+    expander : callable, optional
+        Replaces the library's predictions in the search (see :func:`search`); ``model`` then
+        only names the primitives.
 
     Examples
     --------
@@ -143,7 +146,7 @@ class Planner:
     """
 
     def __init__(self, model, path, weights=CostWeights(), depth=1, heading_lookahead=DEFAULT_HEADING_LOOKAHEAD,
-                 velocity_lookahead=DEFAULT_VELOCITY_LOOKAHEAD, yaw_rate_weight=0.0):
+                 velocity_lookahead=DEFAULT_VELOCITY_LOOKAHEAD, yaw_rate_weight=0.0, expander=None):
         if not isinstance(weights, CostWeights):
             weights = CostWeights(*weights)
         depth = int(depth)
@@ -162,6 +165,7 @@ class Planner:
         if not (np.isfinite(yaw_rate_weight) and yaw_rate_weight >= 0.0):
             raise ValueError(f"yaw_rate_weight {yaw_rate_weight} must be a finite number >= 0")
         self.yaw_rate_weight = float(yaw_rate_weight)
+        self.expander = expander
         self._progress = 0.0
         self._previous_pose = None
 
@@ -202,7 +206,7 @@ class Planner:
         now = path_cost(self.path, pose, self.weights, self._progress, self.heading_lookahead)
         self._progress = max(self._progress, float(now.progress[0]))
         result = search(self.model, self.path, pose, body_velocity, self.depth, self.weights, self._progress,
-                        self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight)
+                        self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight, self.expander)
         first = result.first_action
         goal = self.path.goal_reached(pose, self._progress, self._previous_pose)
         self._previous_pose = pose[:2].copy()

@@ -229,7 +229,7 @@ def extrapolate_poses(poses, body_velocities, horizon):
 
 
 def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), previous_progress=0.0,
-           heading_lookahead=0.0, velocity_lookahead=0.0, yaw_rate_weight=0.0):
+           heading_lookahead=0.0, velocity_lookahead=0.0, yaw_rate_weight=0.0, expander=None):
     """Cheapest of all P^H primitive sequences under eq. 19 (Algorithm 1).
 
     Parameters
@@ -256,6 +256,10 @@ def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), pre
         yaw rate r against the rate the path needs at the predicted forward speed u
         (kappa: signed path curvature at the leaf's closest point), so that a turn's payoff,
         the yaw rate it leaves, counts although its heading change within T is small.
+    expander : callable, optional
+        ``expander(pose, body_velocity, depth) -> (leaf_poses, first_poses, leaf_velocities)``
+        with the leaves in the order of :func:`expand_tree`; replaces the library prediction
+        (e.g. by the simulator itself, to separate the library's error from the planner's).
 
     Returns
     -------
@@ -264,7 +268,10 @@ def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), pre
     """
     if not (np.isfinite(velocity_lookahead) and velocity_lookahead >= 0.0):
         raise ValueError(f"velocity_lookahead {velocity_lookahead} s must be a finite number >= 0")
-    leaves, first, leaf_velocities = expand_tree(model, pose, body_velocity, depth, return_velocities=True)
+    if expander is None:
+        leaves, first, leaf_velocities = expand_tree(model, pose, body_velocity, depth, return_velocities=True)
+    else:
+        leaves, first, leaf_velocities = expander(pose, body_velocity, depth)
     costed = extrapolate_poses(leaves, leaf_velocities, velocity_lookahead) if velocity_lookahead > 0 else leaves
     cost = path_cost(path, costed, weights, previous_progress, heading_lookahead)
     if not (np.isfinite(yaw_rate_weight) and yaw_rate_weight >= 0.0):
