@@ -95,6 +95,18 @@ def main(argv=None) -> int:
     except (LibraryFormatError, ValueError, OSError) as exc:
         print(f"frog-planner-eval: error: {exc}", file=sys.stderr)
         return 2
+    from frog_planner.evaluation import PATHS, path_min_radius, tightest_turn
+    turns = tightest_turn(period=args.period)
+    tightest = min(turns.values())
+    print("\nrobot's tightest steady turn (each primitive repeated from rest): "
+          + ", ".join(f"{k} {100 * v:.1f} cm" for k, v in sorted(turns.items(), key=lambda kv: kv[1])[:4]))
+    for r in results:
+        r["path_min_radius_m"] = path_min_radius(PATHS[{"sinusoid": "sine"}.get(r["path"], r["path"])]())
+        r["robot_tightest_turn_m"] = tightest
+    for name in paths:
+        rad = path_min_radius(PATHS[name]())
+        verdict = "ok" if rad >= tightest else f"TIGHTER than the robot can turn ({rad / tightest:.0%})"
+        print(f"  {name:8s} smallest path radius {100 * rad:6.1f} cm: {verdict}")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "metrics.json").write_text(json.dumps(results, indent=1))
     if args.compare or len(results) > 1:

@@ -205,6 +205,50 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     return ClosedLoopResult(path, t, pose, dist, decisions, metrics)
 
 
+def tightest_turn(period: float = 1.5, periods: int = 6, sim_params: Optional[dict] = None, simulation=None):
+    """The simulated frog's tightest turn: each primitive repeated every ``period`` from rest.
+
+    The radius is the arc length of the centre of mass over its heading change. Paths with
+    tighter curvature than this cannot be followed closely by any planner (a kick turns and
+    pushes at once, so slowing down does not tighten the turn). Measured, not assumed.
+
+    Returns
+    -------
+    dict
+        ``{primitive name: radius in m}`` for the turning primitives (straight ones omitted).
+    """
+    from frog_sim.core.model_parameters import FrogParameters
+    from frog_sim.core.schedules import PRIMITIVE_NAMES
+    from frog_sim.core.simulation import FrogSimulation
+
+    sim = simulation or FrogSimulation(FrogParameters().replace(**(sim_params or {})))
+    steps = int(round(period / sim.time_step))
+    stride = max(1, int(round(0.05 / sim.time_step)))
+    radii = {}
+    for prim, name in enumerate(PRIMITIVE_NAMES):
+        sim.reset()
+        prev = sim.rigid_body_state().com
+        arc = 0.0
+        for _ in range(periods):
+            sim.execute_primitive(prim)
+            for _ in range(0, steps, stride):
+                sim.step(stride)
+                com = sim.rigid_body_state().com
+                arc += float(np.hypot(*(com - prev)))
+                prev = com
+        turned = abs(sim.rigid_body_state().heading)
+        if turned > 1e-6:
+            radii[name] = arc / turned
+    sim.reset()
+    return radii
+
+
+def path_min_radius(path: Path) -> float:
+    """Smallest radius of curvature of the path [m] (inf for a straight line)."""
+    k = np.abs(path.curvature_at(np.linspace(0.0, 1.0, 2001)))
+    return float(1.0 / k.max()) if k.max() > 0 else float("inf")
+
+
 def samples_before_finish(positions, path_points) -> int:
     """Number of samples before the robot crosses the finish line (the normal to the path
     at its end) on its final approach: past it, the distance to the polyline measures

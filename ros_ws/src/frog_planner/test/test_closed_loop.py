@@ -108,3 +108,22 @@ def test_simulator_transitions_predict_the_next_pose_exactly(library):
         assert np.abs(np.asarray(dec["predicted_pose"]) - reached).max() < 1e-9, (k, dec["predicted_pose"], reached)
     with pytest.raises(ValueError, match="depth 1-2"):
         run_closed_loop(path, model, depth=3, period=PERIOD, max_time=2.0, transitions="simulator")
+
+
+def test_tightest_turn_is_mirror_symmetric_and_reported_against_path_curvature():
+    """The turning capability the evaluator reports: mirrored primitives (E/F, G/H, C/D)
+    turn on equal radii, straight ones (A, B, I) are left out, and one-sided E (0110) turns
+    tighter than the three-limb C. Path radii are checked against their closed forms."""
+    from frog_planner.core.paths import ellipse_path, sinusoid_path
+    from frog_planner.evaluation import path_min_radius, tightest_turn
+
+    radii = tightest_turn(period=PERIOD, periods=3)
+    assert set(radii) == {"C", "D", "E", "F", "G", "H"}
+    for a, b in (("E", "F"), ("G", "H"), ("C", "D")):
+        assert radii[a] == pytest.approx(radii[b], rel=1e-5)
+    assert radii["E"] < radii["C"]
+    assert path_min_radius(line_path()) == math.inf
+    # circle of radius l/2 (A = 1); sinusoid y = (l/A) sin(f x / l): min radius l A / f^2 at the
+    # peaks, which the 100-point resampling (paper) rounds off by a few per cent
+    assert path_min_radius(ellipse_path(length=0.3, A=1.0)) == pytest.approx(0.15, rel=1e-3)
+    assert path_min_radius(sinusoid_path(length=0.357, A=8.5, f=10.0)) == pytest.approx(0.357 * 8.5 / 100, rel=0.05)
