@@ -116,7 +116,7 @@ def test_missing_or_corrupt_library_keeps_node_up_publishing_I(launch, probe, tm
     ({"depth": 9}, "depth"), ({"path_type": "spiral"}, "path_type"),
     ({"period": -1.0}, "period"), ({"path_type": "waypoints"}, "waypoint_file"),
     ({"velocity_lookahead": -1.0}, "velocity_lookahead"),
-    ({"goal_lateral_tolerance": -0.01}, "goal_lateral_tolerance")])
+    ({"goal_lateral_tolerance": -0.01}, "goal_lateral_tolerance"), ({"stall_speed": -0.1}, "stall_speed")])
 def test_bad_parameters_exit_with_a_message(launch, params, message):
     node = launch("planner_node", params=params)
     assert node.wait(60) == 2

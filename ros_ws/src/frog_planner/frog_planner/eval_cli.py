@@ -34,7 +34,7 @@ def _run(args, path_name, depth, metric, model_cache):
                           start_offset=(0.0, args.lateral_offset, 0.0), max_time=args.max_time,
                           heading_lookahead=args.heading_lookahead,
                           velocity_lookahead=args.velocity_lookahead, yaw_rate_weight=args.w_r,
-                          transitions=args.transitions)
+                          transitions=args.transitions, stall_speed=args.stall_speed)
     files = save_result(res, args.out)
     m = res.metrics
     print(f"{path_name:8s} depth {depth} {metric:9s}: goal {'yes' if m['goal_reached'] else 'NO '} "
@@ -69,6 +69,9 @@ def main(argv=None) -> int:
                          "(default 1.5; 0 = paper: cost at the predicted pose)")
     ap.add_argument("--w-r", type=float, default=0.0,
                     help="weight per rad/s of |yaw rate - path curvature x speed| at the leaf (0 = paper)")
+    ap.add_argument("--stall-speed", type=float, default=0.002,
+                    help="standing still (below this speed [m/s]) short of the goal, never choose 'no action' "
+                         "(it would wait forever); 0 = the paper")
     ap.add_argument("--transitions", choices=["library", "simulator"], default="library",
                     help="predictions of the search: the library (paper) or exact ones from copies of the "
                          "running simulator (depth <= 2; about 9^depth simulated periods per decision)")
@@ -79,7 +82,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.paper_cost:
         args.w_a, args.w_b, args.w_c = 500.0, 50.0, 300.0
-        args.heading_lookahead = args.velocity_lookahead = args.w_r = 0.0
+        args.heading_lookahead = args.velocity_lookahead = args.w_r = args.stall_speed = 0.0
         args.gradient_correction = False
     from frog_planner.core.library_file import LibraryFormatError
     paths = ["line", "sine", "ellipse"] if args.path == "all" or args.compare else [args.path]

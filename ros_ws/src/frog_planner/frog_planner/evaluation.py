@@ -20,7 +20,8 @@ from typing import Optional
 import numpy as np
 
 from frog_planner.core.paths import Path, ellipse_path, line_path, sinusoid_path
-from frog_planner.core.planner import DEFAULT_HEADING_LOOKAHEAD, DEFAULT_VELOCITY_LOOKAHEAD, Planner
+from frog_planner.core.planner import (DEFAULT_HEADING_LOOKAHEAD, DEFAULT_STALL_SPEED, DEFAULT_VELOCITY_LOOKAHEAD,
+                                      Planner)
 from frog_planner.core.transition_model import TransitionModel
 from frog_planner.core.tree_search import CostWeights
 
@@ -88,7 +89,8 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
                     heading_lookahead: float = DEFAULT_HEADING_LOOKAHEAD,
                     velocity_lookahead: float = DEFAULT_VELOCITY_LOOKAHEAD,
                     yaw_rate_weight: float = 0.0,
-                    simulation=None, transitions: str = "library") -> ClosedLoopResult:
+                    simulation=None, transitions: str = "library",
+                    stall_speed: float = DEFAULT_STALL_SPEED) -> ClosedLoopResult:
     """Follow ``path`` with the simulated frog until the goal or ``max_time``.
 
     Parameters
@@ -121,6 +123,8 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     transitions : {'library', 'simulator'}
         Predictions of the search: the motion library (the paper) or exact ones from copies
         of the running simulator (:func:`simulator_expander`; depth <= 2, slow).
+    stall_speed : float
+        See :class:`~frog_planner.core.planner.Planner` (0 = the paper).
 
     Returns
     -------
@@ -139,7 +143,8 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
         raise ValueError(f"transitions {transitions!r} unknown; expected one of {TRANSITION_SOURCES}")
     expander = simulator_expander(sim, period, model.n_primitives) if transitions == "simulator" else None
     planner = Planner(model, path, weights, depth, heading_lookahead=heading_lookahead,
-                      velocity_lookahead=velocity_lookahead, yaw_rate_weight=yaw_rate_weight, expander=expander)
+                      velocity_lookahead=velocity_lookahead, yaw_rate_weight=yaw_rate_weight, expander=expander,
+                      stall_speed=stall_speed)
     max_time = max_time or path.length / 0.005
     stride = int(round(sample_interval / sim.time_step))
     steps_per_period = int(round(period / sim.time_step))
@@ -192,6 +197,7 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
         "k_neighbours": model.k,
         "gradient_correction": model.gradient_correction, "heading_lookahead_m": heading_lookahead,
         "velocity_lookahead_s": velocity_lookahead, "yaw_rate_weight": yaw_rate_weight,
+        "stall_speed_m_per_s": stall_speed,
         "weights": [weights.distance, weights.heading, weights.progress],
         "goal_reached": goal_time is not None,
         "completion_time_s": goal_time,

@@ -298,3 +298,42 @@ def test_velocity_lookahead_and_yaw_rate_term_match_brute_force(tiny):
         search(model, path, pose, vel, 1, velocity_lookahead=-1.0)
     with pytest.raises(ValueError, match="yaw_rate_weight"):
         Planner(model, path, yaw_rate_weight=float("nan"))
+
+
+def _drifting_model(bits):
+    """One state at rest; every action moves 2 cm forward with its own sideways drift and
+    turn, 'no action' (I) moves nothing: distance to a straight path only grows with a kick."""
+    table = np.zeros((9, 1, 6))
+    for p in range(8):
+        side = 1.0 if p % 2 else -1.0
+        table[p, 0] = [0.02, side * 0.002 * (1 + p), side * 0.02 * (1 + p), 0.0, 0.0, 0.0]
+    return TransitionModel(np.zeros((1, 3)), table, list("ABCDEFGHI"), primitive_bits=list(bits))
+
+
+@pytest.mark.parametrize("depth", [1, 2])
+def test_planner_does_not_wait_forever_at_rest(synthetic, depth):
+    """A cost that weighs only the distance to the path makes 'no action' the cheapest choice
+    at rest (every kick drifts off the line). Standing still, that choice would repeat
+    forever; the stall guard takes the cheapest sequence that starts with an action instead.
+    Moving, or with the guard off (the paper), 'no action' stays."""
+    model = _drifting_model(synthetic.BITS)
+    path = line_path(length=0.3)
+    weights = CostWeights(distance=500.0, heading=0.0, progress=0.0)
+    rest = [0.0, 0.0, 0.0]
+    kw = dict(heading_lookahead=0.0, velocity_lookahead=0.0)
+    paper = Planner(model, path, weights, depth, stall_speed=0.0, **kw)
+    assert paper.decide([0.0, 0.0, 0.0], rest).name == "I"
+    d = Planner(model, path, weights, depth, **kw).decide([0.0, 0.0, 0.0], rest)
+    assert d.name != "I" and d.sequence[0] == d.primitive_id
+    # the cheapest leaf among the sequences that start with an action (brute force over leaves)
+    res = search(model, path, [0.0, 0.0, 0.0], rest, depth, weights)
+    span = 9 ** (depth - 1)
+    allowed = [i for i in range(9 ** depth) if i // span != 8]
+    assert d.total_cost == pytest.approx(min(res.leaf_total[i] for i in allowed))
+    if depth == 1:
+        assert d.name == "A"                  # the smallest drift (2 mm right, 0.02 rad)
+    # moving, the guard stays out of the way
+    moving = Planner(model, path, weights, depth, **kw)
+    assert moving.decide([0.0, 0.0, 0.0], [0.03, 0.0, 0.0]).name == "I"
+    with pytest.raises(ValueError, match="stall_speed"):
+        Planner(model, path, weights, depth, stall_speed=-1.0)

@@ -91,10 +91,14 @@ DEFAULT_HEADING_LOOKAHEAD = 0.1
 #: Default velocity look-ahead [s]: chosen on the DER simulator (see ``Planner``).
 DEFAULT_VELOCITY_LOOKAHEAD = 1.5
 
+#: Below this planar speed [m/s] and yaw rate [rad/s] the robot counts as standing still.
+DEFAULT_STALL_SPEED = 0.002
+STALL_YAW_RATE = 0.01
+
 #: Keyword arguments of :class:`Planner` that give the paper's exact cost: eq. 19 at the leaf
 #: with the paper's weights and the heading error against the path tangent.
 PAPER_COST = {"weights": CostWeights(), "heading_lookahead": 0.0, "velocity_lookahead": 0.0,
-              "yaw_rate_weight": 0.0}
+              "yaw_rate_weight": 0.0, "stall_speed": 0.0}
 
 
 def _vector(value, name, unit):
@@ -136,6 +140,13 @@ class Planner:
     expander : callable, optional
         Replaces the library's predictions in the search (see :func:`search`); ``model`` then
         only names the primitives.
+    stall_speed : float
+        m/s; 0 (the paper) disables. When the robot stands still (planar speed below this,
+        yaw rate below 0.01 rad/s) short of the goal and the cheapest sequence starts with
+        the no-action primitive, the cheapest sequence starting with an action is taken
+        instead: from rest, no action leaves the state and therefore the decision unchanged,
+        so the planner would wait forever (a cost that weighs heading or distance strongly
+        against progress makes every first kick look worse than waiting at a curved start).
 
     Examples
     --------
@@ -146,7 +157,8 @@ class Planner:
     """
 
     def __init__(self, model, path, weights=CostWeights(), depth=1, heading_lookahead=DEFAULT_HEADING_LOOKAHEAD,
-                 velocity_lookahead=DEFAULT_VELOCITY_LOOKAHEAD, yaw_rate_weight=0.0, expander=None):
+                 velocity_lookahead=DEFAULT_VELOCITY_LOOKAHEAD, yaw_rate_weight=0.0, expander=None,
+                 stall_speed=DEFAULT_STALL_SPEED):
         if not isinstance(weights, CostWeights):
             weights = CostWeights(*weights)
         depth = int(depth)
@@ -166,6 +178,12 @@ class Planner:
             raise ValueError(f"yaw_rate_weight {yaw_rate_weight} must be a finite number >= 0")
         self.yaw_rate_weight = float(yaw_rate_weight)
         self.expander = expander
+        if not (np.isfinite(stall_speed) and stall_speed >= 0.0):
+            raise ValueError(f"stall_speed {stall_speed} m/s must be a finite number >= 0")
+        self.stall_speed = float(stall_speed)
+        bits = getattr(model, "primitive_bits", None)
+        idle = [i for i, b in enumerate(bits or []) if set(b) <= {"0"}]
+        self._idle = idle[0] if idle else None
         self._progress = 0.0
         self._previous_pose = None
 
@@ -207,17 +225,28 @@ class Planner:
         self._progress = max(self._progress, float(now.progress[0]))
         result = search(self.model, self.path, pose, body_velocity, self.depth, self.weights, self._progress,
                         self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight, self.expander)
-        first = result.first_action
         goal = self.path.goal_reached(pose, self._progress, self._previous_pose)
         self._previous_pose = pose[:2].copy()
+        best = result.best_leaf
+        n_prim = len(result.first_poses)
+        span = n_prim ** (self.depth - 1)             # leaves per first action (base-P digits)
+        standing = (np.hypot(body_velocity[0], body_velocity[1]) < self.stall_speed
+                    and abs(body_velocity[2]) < STALL_YAW_RATE)
+        if standing and not goal and self._idle is not None and best // span == self._idle:
+            totals = result.leaf_total.copy()
+            totals[self._idle * span:(self._idle + 1) * span] = np.inf
+            best = int(np.argmin(totals))
+        first = best // span
+        sequence = tuple(int(best // n_prim ** (self.depth - 1 - d)) % n_prim for d in range(self.depth))
         return Decision(
-            primitive_id=int(first), name=self.model.primitive_names[first], total_cost=result.total_cost,
-            cost_terms=CostTerms.from_array(result.leaf_cost.terms[result.best_leaf]),
+            primitive_id=int(first), name=self.model.primitive_names[first],
+            total_cost=float(result.leaf_total[best]),
+            cost_terms=CostTerms.from_array(result.leaf_cost.terms[best]),
             predicted_pose=result.first_poses[first].copy(), progress=self._progress,
             distance_to_path=float(now.distance[0]), current_cost=float(now.total[0]),
-            current_cost_terms=CostTerms.from_array(now.terms[0]), sequence=result.sequence,
+            current_cost_terms=CostTerms.from_array(now.terms[0]), sequence=sequence,
             goal_reached=goal,
-            yaw_rate_cost=float(result.yaw_rate_cost[result.best_leaf]))
+            yaw_rate_cost=float(result.yaw_rate_cost[best]))
 
     def decide_from_world_state(self, state):
         """:meth:`decide` from a world-frame state [x, y, theta, x_dot, y_dot, theta_dot] (Algorithm 1 step 5).

@@ -43,6 +43,8 @@ _PARAMS = [
                                "paper's path tangent at the closest point"),
     ("velocity_lookahead", 1.5, "cost each leaf pose extrapolated by its predicted body velocities "
                                 "and yaw rate over this time [s]; 0 = the paper (cost at the leaf)"),
+    ("stall_speed", 0.002, "below this planar speed [m/s] (and 0.01 rad/s yaw rate) short of the goal, "
+                           "never choose 'no action' (it would wait forever); 0 = the paper"),
     ("path_type", "line", "line, sine, ellipse or waypoints"),
     ("path_length", 0.0, "path length/size [m]; 0 = the paper's value for the path type"),
     ("path_start_x", 0.0, "path start x in the world frame [m]"),
@@ -136,12 +138,13 @@ class PlannerNode(Node):
                   ("path_length", p["path_length"] >= 0, ">= 0 m"),
                   ("goal_lateral_tolerance", p["goal_lateral_tolerance"] >= 0, ">= 0 m"),
                   ("heading_lookahead", p["heading_lookahead"] >= 0, ">= 0 m"),
-                  ("velocity_lookahead", p["velocity_lookahead"] >= 0, ">= 0 s")]
+                  ("velocity_lookahead", p["velocity_lookahead"] >= 0, ">= 0 s"),
+                  ("stall_speed", p["stall_speed"] >= 0, ">= 0 m/s")]
         for name, ok, expected in checks:
             if not ok:
                 raise ConfigurationError(f"parameter {name} = {p[name]!r} must be {expected}")
         for name in ("w_distance", "w_heading", "w_progress", "path_start_x", "path_start_y",
-                     "path_heading", "period", "path_length", "heading_lookahead", "velocity_lookahead",
+                     "path_heading", "period", "path_length", "heading_lookahead", "velocity_lookahead", "stall_speed",
                      "goal_tolerance", "goal_lateral_tolerance"):
             if not math.isfinite(p[name]):
                 raise ConfigurationError(f"parameter {name} = {p[name]!r} must be finite")
@@ -158,7 +161,8 @@ class PlannerNode(Node):
                                              gradient_correction=p["gradient_correction"])
                 self.planner = Planner(model, self.path, self.weights, p["depth"],
                                        heading_lookahead=p["heading_lookahead"],
-                                       velocity_lookahead=p["velocity_lookahead"])
+                                       velocity_lookahead=p["velocity_lookahead"],
+                                       stall_speed=p["stall_speed"])
                 self.library_error = None
                 self.get_logger().info(f"library {p['library_file']}: {model.n_states} states, "
                                        f"{model.n_primitives} primitives")
