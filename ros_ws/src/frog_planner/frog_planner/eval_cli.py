@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+
+import numpy as np
 from pathlib import Path
 
 EPILOG = """examples:
@@ -77,6 +79,9 @@ def main(argv=None) -> int:
                          "running simulator (depth <= 2; about 9^depth simulated periods per decision)")
     ap.add_argument("--lateral-offset", type=float, default=0.0, help="start offset left of the path [m]")
     ap.add_argument("--max-time", type=float, default=None, help="give up after [s]")
+    ap.add_argument("--turning", action="store_true",
+                    help="also measure how the simulated frog turns (sustained E, G, C: steady circle, yaw "
+                         "rise time, side-slip; about a minute)")
     ap.add_argument("--compare", action="store_true", help="depths 1-3 x both metrics on every path")
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args(argv)
@@ -98,18 +103,20 @@ def main(argv=None) -> int:
     except (LibraryFormatError, ValueError, OSError) as exc:
         print(f"frog-planner-eval: error: {exc}", file=sys.stderr)
         return 2
-    from frog_planner.evaluation import PATHS, path_min_radius, tightest_turn
-    turns = tightest_turn(period=args.period)
-    tightest = min(turns.values())
-    print("\nrobot's tightest steady turn (each primitive repeated from rest): "
-          + ", ".join(f"{k} {100 * v:.1f} cm" for k, v in sorted(turns.items(), key=lambda kv: kv[1])[:4]))
+    from frog_planner.evaluation import PATHS, path_min_radius
     for r in results:
         r["path_min_radius_m"] = path_min_radius(PATHS[{"sinusoid": "sine"}.get(r["path"], r["path"])]())
-        r["robot_tightest_turn_m"] = tightest
-    for name in paths:
-        rad = path_min_radius(PATHS[name]())
-        verdict = "ok" if rad >= tightest else f"TIGHTER than the robot can turn ({rad / tightest:.0%})"
-        print(f"  {name:8s} smallest path radius {100 * rad:6.1f} cm: {verdict}")
+    if args.turning:
+        from frog_planner.evaluation import turning_response
+        print("\nturning response, each primitive repeated every period from rest for 45 s:")
+        print(f"  {'prim':4s} {'steady COM circle cm':>20} {'speed cm/s':>10} {'yaw deg/s':>9} "
+              f"{'63% yaw after s':>15} {'max side-slip deg':>17}")
+        for prim in ("E", "G", "C"):
+            tr = turning_response(prim, period=args.period)
+            print(f"  {prim:4s} {100 * tr.steady_radius:20.1f} {100 * tr.steady_speed:10.2f} "
+                  f"{np.degrees(tr.steady_yaw_rate):9.1f} {tr.rise_time:15.1f} {np.degrees(tr.max_course_lag):17.0f}")
+        for name in paths:
+            print(f"  path {name:8s} smallest radius {100 * path_min_radius(PATHS[name]()):6.1f} cm")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "metrics.json").write_text(json.dumps(results, indent=1))
     if args.compare or len(results) > 1:

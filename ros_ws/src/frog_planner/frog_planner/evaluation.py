@@ -211,42 +211,61 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     return ClosedLoopResult(path, t, pose, dist, decisions, metrics)
 
 
-def tightest_turn(period: float = 1.5, periods: int = 6, sim_params: Optional[dict] = None, simulation=None):
-    """The simulated frog's tightest turn: each primitive repeated every ``period`` from rest.
+@dataclass
+class TurningResponse:
+    """How the simulated frog turns under one primitive repeated every period, from rest (SI)."""
 
-    The radius is the arc length of the centre of mass over its heading change. Paths with
-    tighter curvature than this cannot be followed closely by any planner (a kick turns and
-    pushes at once, so slowing down does not tighten the turn). Measured, not assumed.
+    primitive: str
+    steady_radius: float        # m, circle fitted to the COM track over the last 40 % of the run
+    steady_speed: float         # m/s, COM displacement per period / period over that part
+    steady_yaw_rate: float      # rad/s, mean over that part
+    rise_time: float            # s until the yaw rate first reaches 63 % of its steady value
+    max_course_lag: float       # rad, largest |heading - direction of travel| while moving > 2 mm/s
 
-    Returns
-    -------
-    dict
-        ``{primitive name: radius in m}`` for the turning primitives (straight ones omitted).
+
+def turning_response(primitive, period: float = 1.5, duration: float = 45.0, sim_params: Optional[dict] = None,
+                     simulation=None) -> TurningResponse:
+    """Repeat ``primitive`` every ``period`` from rest and measure the turn it settles into.
+
+    The frog's square body has no keel: its heading turns well before its centre of mass
+    changes course (side-slip), and the yaw rate builds up over many periods. A body-heading
+    turn is therefore not a COM turn, and the radius of a steady circle says nothing about
+    how quickly it can be reached; both numbers are reported.
     """
     from frog_sim.core.model_parameters import FrogParameters
-    from frog_sim.core.schedules import PRIMITIVE_NAMES
     from frog_sim.core.simulation import FrogSimulation
 
     sim = simulation or FrogSimulation(FrogParameters().replace(**(sim_params or {})))
+    sim.reset()
     steps = int(round(period / sim.time_step))
     stride = max(1, int(round(0.05 / sim.time_step)))
-    radii = {}
-    for prim, name in enumerate(PRIMITIVE_NAMES):
-        sim.reset()
-        prev = sim.rigid_body_state().com
-        arc = 0.0
-        for _ in range(periods):
-            sim.execute_primitive(prim)
-            for _ in range(0, steps, stride):
-                sim.step(stride)
-                com = sim.rigid_body_state().com
-                arc += float(np.hypot(*(com - prev)))
-                prev = com
-        turned = abs(sim.rigid_body_state().heading)
-        if turned > 1e-6:
-            radii[name] = arc / turned
+    t, com, yaw, lag = [], [], [], []
+    for _ in range(int(np.ceil(duration / period))):
+        sim.execute_primitive(primitive)
+        for _ in range(0, steps, stride):
+            sim.step(stride)
+            st = sim.rigid_body_state()
+            t.append(sim.time)
+            com.append(st.com.copy())
+            yaw.append(st.yaw_rate)
+            if np.hypot(*st.body_velocity[:2]) > 0.002:
+                lag.append(abs(np.arctan2(st.body_velocity[1], st.body_velocity[0])))
+    t, com, yaw = np.array(t), np.array(com), np.array(yaw)
+    late = t > 0.6 * t[-1]
+    pts = com[late]
+    # algebraic (Kasa) circle fit: |p|^2 = 2 c.p + k
+    a = np.column_stack([2.0 * pts, np.ones(len(pts))])
+    sol = np.linalg.lstsq(a, (pts ** 2).sum(axis=1), rcond=None)[0]
+    radius = float(np.sqrt(sol[2] + sol[0] ** 2 + sol[1] ** 2))
+    # speed from the displacement over whole periods: the COM wiggles within each kick
+    lag_n = steps // stride
+    speed = float(np.mean(np.hypot(*(pts[lag_n:] - pts[:-lag_n]).T)) / period)
+    steady_yaw = float(yaw[late].mean())
+    reached = np.nonzero(np.abs(yaw) >= 0.63 * abs(steady_yaw))[0] if steady_yaw != 0 else []
+    rise = float(t[reached[0]]) if len(reached) else float("nan")
     sim.reset()
-    return radii
+    name = primitive if isinstance(primitive, str) else "ABCDEFGHI"[int(primitive)]
+    return TurningResponse(name, radius, speed, steady_yaw, rise, float(max(lag)) if lag else 0.0)
 
 
 def path_min_radius(path: Path) -> float:

@@ -110,18 +110,19 @@ def test_simulator_transitions_predict_the_next_pose_exactly(library):
         run_closed_loop(path, model, depth=3, period=PERIOD, max_time=2.0, transitions="simulator")
 
 
-def test_tightest_turn_is_mirror_symmetric_and_reported_against_path_curvature():
-    """The turning capability the evaluator reports: mirrored primitives (E/F, G/H, C/D)
-    turn on equal radii, straight ones (A, B, I) are left out, and one-sided E (0110) turns
-    tighter than the three-limb C. Path radii are checked against their closed forms."""
+def test_turning_response_mirrors_and_matches_its_own_track():
+    """Mirrored primitives (E right, F left) settle into mirrored circles; the fitted steady
+    radius agrees with speed / yaw rate of a steady circle; the yaw rate takes periods to
+    build up. Path radii are checked against their closed forms."""
     from frog_planner.core.paths import ellipse_path, sinusoid_path
-    from frog_planner.evaluation import path_min_radius, tightest_turn
+    from frog_planner.evaluation import path_min_radius, turning_response
 
-    radii = tightest_turn(period=PERIOD, periods=3)
-    assert set(radii) == {"C", "D", "E", "F", "G", "H"}
-    for a, b in (("E", "F"), ("G", "H"), ("C", "D")):
-        assert radii[a] == pytest.approx(radii[b], rel=1e-5)
-    assert radii["E"] < radii["C"]
+    e = turning_response("E", period=PERIOD)
+    f = turning_response("F", period=PERIOD)
+    assert e.steady_radius == pytest.approx(f.steady_radius, rel=1e-4)
+    assert e.steady_yaw_rate == pytest.approx(-f.steady_yaw_rate, rel=1e-4) and e.steady_yaw_rate < 0
+    assert e.steady_radius == pytest.approx(e.steady_speed / abs(e.steady_yaw_rate), rel=0.15)
+    assert e.rise_time > 2 * PERIOD
     assert path_min_radius(line_path()) == math.inf
     # circle of radius l/2 (A = 1); sinusoid y = (l/A) sin(f x / l): min radius l A / f^2 at the
     # peaks, which the 100-point resampling (paper) rounds off by a few per cent
