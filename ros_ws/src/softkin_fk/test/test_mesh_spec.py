@@ -10,7 +10,7 @@ from softkin_fk.cli import main
 from softkin_fk.core.forward import ForwardSolver
 from softkin_fk.core.mesh import read_tetgen, read_volume_mesh, write_tetgen
 from softkin_fk.core.mesh_spec import MeshSpecError, export_mesh_with_spec, load_mesh_with_spec
-from softkin_fk.core.models import build_pneumatic_actuator, build_tendon_finger
+from softkin_fk.core.models import build_dea_crawler, build_pneumatic_actuator, build_tendon_finger
 
 EXAMPLES = os.path.join(os.path.dirname(__file__), '..', 'examples')
 EX_MESH = os.path.join(EXAMPLES, 'finger_mm.msh')
@@ -108,6 +108,19 @@ def test_export_round_trip_finger_cables_as_triangle_cells(tmp_path):
     _same_groups(m, user)
     c = np.array([0.95, 1.0, 0.97])
     a, b = ForwardSolver(m).solve(c, tol=1e-10), ForwardSolver(user).solve(c, tol=1e-10)
+    assert np.linalg.norm(a.marker(m) - b.marker(user)) < TIP_TOL
+
+
+def test_export_round_trip_dea_prism_mesh(tmp_path):
+    """A prism (wedge) shell with two body regions of different R_w and a DEA membrane."""
+    m = build_dea_crawler()
+    path = str(tmp_path / 'dea.msh')
+    export_mesh_with_spec(m, path, units='mm')
+    user = load_mesh_with_spec(path, str(tmp_path / 'dea.json'))
+    _same_groups(m, user)
+    c = np.array([1.4])
+    a, b = ForwardSolver(m).solve(c, tol=1e-10), ForwardSolver(user).solve(c, tol=1e-10)
+    assert np.linalg.norm(a.marker(m) - m.vertices[m.markers['tip']]) > 1e-3
     assert np.linalg.norm(a.marker(m) - b.marker(user)) < TIP_TOL
 
 

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from softkin_fk.core.forward import ForwardSolver
+from softkin_fk.core.inverse import solve_ik
 from softkin_fk.core.models import build_tendon_finger
 from softkin_fk.core.curves import workspace_region
 from softkin_fk.core.trajectory import (curve_flame, curve_L, follow_trajectory, read_waypoints_csv,
@@ -69,3 +70,18 @@ def test_path_partly_outside_workspace_stays_continuous_and_reachable():
     assert not np.all(tr.reached_flags[4:])
     spacing = np.linalg.norm(np.diff(P, axis=0), axis=1).max()
     assert np.linalg.norm(np.diff(tr.reached, axis=0), axis=1).max() <= 2 * spacing
+
+
+@pytest.mark.slow
+def test_builtin_curves_reached_at_default_resolution():
+    """The waypoints of each curve nearest to the workspace boundary (L: its start; flame: #19),
+    the L's end and the flame's lowest point are reached within lambda = 0.2 mm by the default
+    (resolution-2) finger, each by an independent IK solve from the middle of the actuation box
+    (the full check on every 5th waypoint is ``softkin workspace --ik-every 5``)."""
+    mesh = build_tendon_finger()
+    fs = ForwardSolver(mesh)
+    mid = np.array([np.mean(a.bounds) for a in mesh.actuators])
+    L, F = curve_L(), curve_flame()
+    for p in (L[0], L[-1], F[19], F[63]):
+        r = solve_ik(fs, p, initial=mid, direction='gauss-newton')
+        assert r.error <= 0.2e-3, (p, r.error)
