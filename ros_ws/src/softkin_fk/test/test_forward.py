@@ -115,7 +115,8 @@ def test_rigid_motion_equivariance():
     assert np.abs(res2.positions - (res.positions @ R.T + t)).max() < 1e-8  # m (deformation ~1e-2 m)
 
 
-@pytest.mark.parametrize('method,accelerate', [('local-global', False), ('local-global', True), ('lbfgs', True)])
+@pytest.mark.parametrize('method,accelerate', [('local-global', False), ('local-global', True), ('lbfgs', True),
+                                               ('newton', True)])
 def test_energy_never_increases(method, accelerate):
     mesh, end = bar()
     res = ForwardSolver(mesh).solve(fixed_positions=bent_handles(mesh, end), method=method,

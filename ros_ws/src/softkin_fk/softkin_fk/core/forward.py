@@ -41,6 +41,8 @@ from .global_step import GlobalSolver, assemble_system_matrix
 from .local_step import (KIND_CODES, element_measure_ratios, local_targets,
                          local_step_numpy, rest_measures, scatter_rhs)
 from .mesh import SoftMesh, element_measures, tet_volumes
+from .newton import NewtonSystem, dgrad_dratio
+from .newton import available as newton_available
 
 
 @dataclasses.dataclass
@@ -145,6 +147,12 @@ class ForwardSolver:
         self._memory = ([], [])
         self._active = np.ones(len(mesh.actuators), bool)
         self.use_numba = use_numba
+        self._newton = None
+        self._last_factor = None
+        #: local/global iterations after each trial Newton step (0: plain Newton)
+        self.newton_correction = 1
+        #: a list to receive (iteration, step length, max |d|, energy, exact Hessian) per Newton step
+        self.newton_log = None
         x0 = mesh.vertices
         self.groups: List[_Group] = []
         blocks = []
@@ -206,15 +214,18 @@ class ForwardSolver:
             out[a] = float(cur @ ad.rest_measure)
         return out
 
-    def local_step(self, x: np.ndarray, levels: Optional[np.ndarray] = None) -> float:
-        """Compute targets at ``x`` (in place) for actuation ``levels``; return the energy of
-        eq. 9 at ``x``."""
+    def _set_levels(self, levels: Optional[np.ndarray]) -> None:
         if levels is None:
             levels = np.ones(len(self.actuators))
         for a, ad in enumerate(self.actuators):
             grp = self.groups[ad.group]
             grp.ratios[:] = levels[a]
             grp.passive[:] = not self._active[a]
+
+    def local_step(self, x: np.ndarray, levels: Optional[np.ndarray] = None) -> float:
+        """Compute targets at ``x`` (in place) for actuation ``levels``; return the energy of
+        eq. 9 at ``x``."""
+        self._set_levels(levels)
         e = 0.0
         for grp in self.groups:
             if len(grp.elements) == 0:
@@ -342,14 +353,21 @@ class ForwardSolver:
             variational = all(np.all(g.shape_parameter == 1.0) for g in self.groups if g.kind == 0)
             safeguard = 'energy' if variational else 'residual'
         if method == 'auto':
-            method = 'lbfgs' if safeguard == 'energy' and accelerate else 'local-global'
-        if method not in ('lbfgs', 'local-global'):
-            raise ValueError(f"method {method!r} is not 'auto', 'lbfgs' or 'local-global'")
+            if safeguard == 'energy' and accelerate:
+                method = 'newton' if newton_available() else 'lbfgs'
+            else:
+                method = 'local-global'
+        if method not in ('newton', 'lbfgs', 'local-global'):
+            raise ValueError(f"method {method!r} is not 'auto', 'newton', 'lbfgs' or 'local-global'")
+        if method == 'newton' and safeguard != 'energy':
+            raise ValueError("method 'newton' minimises the energy of eq. 9, which needs all R_w = 1")
         if safeguard not in ('energy', 'residual', 'none'):
             raise ValueError(f"safeguard {safeguard!r} is not 'auto', 'energy', 'residual' or 'none'")
 
         levels = self.initial_levels(act) if levels0 is None else np.array(levels0, float)
         def inner(xs, lvs):
+            if method == 'newton':
+                return self._newton_solve(xs, lvs, fpos, tol, max_iter, min_iter, record_energy)
             if method == 'lbfgs':
                 return self._lbfgs_solve(xs, lvs, fpos, tol, max_iter, min_iter, window, record_energy)
             return self._inner_solve(xs, lvs, fpos, tol, max_iter, min_iter, accelerate, window, safeguard,
@@ -576,6 +594,265 @@ class ForwardSolver:
                 break
         self._memory = (S, Y)
         return x, E, np.asarray(energies), it, converged, step_norm, 0
+
+    # --------------------------------------------------------------------------------------
+    def newton_system(self) -> NewtonSystem:
+        """The Hessian pattern and symbolic factorisation (built on first use)."""
+        if self._newton is None:
+            h = float(np.median([np.cbrt(np.median(g.rest_volume[g.rest_volume > 0]))
+                                 for g in self.groups if g.kind == 0 and len(g.elements)]))
+            self._newton = NewtonSystem(self.groups, self.mesh.n_vertices, self.global_solver.free, h)
+        return self._newton
+
+    def _newton_factor(self, ns: NewtonSystem, H: np.ndarray, shifts: int = 8):
+        """Cholesky of an assembled Hessian; a growing diagonal shift if round-off makes the
+        (projected, PSD) matrix indefinite. Raises ArithmeticError after ``shifts`` tries."""
+        shift = 0.0
+        diag = ns.diagonal
+        for k in range(shifts + 1):
+            try:
+                if shift == 0.0:
+                    return ns.factor(H)
+                Hs = H.copy()
+                Hs[diag] += shift
+                return ns.factor(Hs)
+            except ArithmeticError:
+                ns.reset()
+                if k == shifts:
+                    raise
+                shift = 1e-10 * float(np.mean(H[diag])) if shift == 0.0 else 100.0 * shift
+        raise ArithmeticError("Newton Hessian could not be factorised")
+
+    def _newton_solve(self, x, levels, fpos, tol, max_iter, min_iter, record_energy):
+        """Newton on eq. 9 with fixed actuation levels (all R_w = 1), globalised by an Armijo
+        backtracking line search on the energy (so the energy never increases).
+
+        Hessian: after a damped step each element Hessian is projected onto PSD (exactly, in
+        its 3-dim rotation subspace, see :mod:`.newton`) so the direction descends; after a
+        full step the exact Hessian is tried first (compressed elements are indefinite on
+        their own, but the assembled Hessian is positive definite near a strict minimiser),
+        which restores quadratic convergence; if its Cholesky fails or its direction does not
+        descend, the projected one is used.
+
+        Each trial point x + alpha d is followed by ``newton_correction`` local/global
+        iterations (cheap: back-substitutions with the factor of eq. 10) before the energy
+        test: a linear step along a large rotation stretches elements, and one local/global
+        iteration re-fits the rotations; on the 240-degree bender this halves the Newton
+        iterations. If no corrected trial passes, the plain line search is used.
+
+        Converged when a full Newton step moves no coordinate by more than ``tol`` (m).
+        Returns like :meth:`_inner_solve`."""
+        ns = self.newton_system()
+        self._set_levels(levels)
+        free = ns.free
+        x = x.copy()
+        x[self.global_solver.fixed] = fpos
+        exact = False
+        E, g, H = ns.evaluate(x, project=1)
+        energies = [E] if record_energy else []
+        converged = False
+        step_norm = np.inf
+        it = 0
+        chord = None      # direction from the previous factor at the current x (cheap convergence test)
+        x_H = x           # where the current factor's Hessian was assembled
+        # a local/global correction pays only for steps that are not small against an element
+        corr_min = 0.02 * ns.scale
+        stalled = 0
+        while it < max_iter:
+            it += 1
+            if chord is not None:
+                d, chord = chord, None
+                if not (float(np.max(np.abs(d))) < tol and it >= min_iter and exact):
+                    # not converged yet: a fresh (exact) Newton step from here
+                    E, g, H = ns.evaluate(x, project=0)
+                    exact = True
+                    d = None
+            else:
+                d = None
+            exact_failed = False
+            if d is None:
+                F = None
+                if exact:
+                    try:
+                        F = self._newton_factor(ns, H, shifts=0)
+                        d = -ns.solve(F, g)
+                        if not float(g @ d) < 0:
+                            F = None
+                    except ArithmeticError:
+                        F = None
+                    if F is None:
+                        exact = False
+                        exact_failed = True
+                        E, g, H = ns.evaluate(x, project=1)
+                if F is None:
+                    F = self._newton_factor(ns, H)
+                    d = -ns.solve(F, g)
+                x_H = x
+                F_exact = exact
+            step_norm = float(np.max(np.abs(d))) if d.size else 0.0
+            slope = float(g @ d)
+            x_old = x.copy()
+            if step_norm < tol and it >= min_iter and not exact and not exact_failed:
+                # a projected Hessian is stiffer than the true one in soft directions, so a small
+                # projected step does not prove convergence: test with the exact Hessian
+                E, g, H = ns.evaluate(x, project=0)
+                exact = True
+                continue
+            if step_norm < tol and it >= min_iter:
+                # at the minimiser within tol: take the plain step unless round-off makes E rise
+                x[free] += d.reshape(-1, 3)
+                E_new, g_new, _ = ns.evaluate(x, hessian=False)
+                if E_new <= E:
+                    E, g = E_new, g_new
+                else:
+                    x = x_old
+                if record_energy:
+                    energies.append(E)
+                converged = True
+                # the factor is the exact Hessian at x_H (within a step of the result): reusable
+                # by sensitivity() without refactorising when x_H is close enough
+                self._last_factor = (ns.version, exact, x, levels.copy(), self._active.copy(),
+                                     float(np.max(np.abs(x - x_H))))
+                break
+            accepted = False
+            H_new = None
+            fused = step_norm > 100.0 * tol  # the next iteration will need a Hessian anyway
+            for corr in ((self.newton_correction, 0) if self.newton_correction and step_norm > corr_min else (0,)):
+                alpha = 1.0
+                for _ in range(40):
+                    x = x_old.copy()
+                    x[free] += alpha * d.reshape(-1, 3)
+                    for _ in range(corr):
+                        self.local_step(x, levels)
+                        x = self.global_step(fpos, out=x)
+                    # the full step is usually accepted: assemble the next (exact) Hessian with
+                    # the energy test instead of a second pass
+                    E_new, g_new, H_new = ns.evaluate(x, hessian=fused and alpha == 1.0, project=0)
+                    # Armijo; at round-off level (tiny steps) accept what does not increase E
+                    if E_new <= E + 1e-4 * alpha * slope or (alpha * step_norm < tol and E_new <= E):
+                        accepted = True
+                        break
+                    alpha *= 0.5
+                if accepted:
+                    break
+            if not accepted:
+                x = x_old  # no decrease along d: round-off level, stop here
+                converged = step_norm < tol
+                break
+            # stagnation at round-off (tol below what double precision resolves): stop
+            stalled = stalled + 1 if E_new >= E * (1.0 - 1e-14) else 0
+            if record_energy:
+                energies.append(E_new)
+            if stalled >= 5:
+                E, g = E_new, g_new
+                break
+            if self.newton_log is not None:
+                self.newton_log.append((it, alpha, step_norm, E_new, exact))
+            exact = alpha == 1.0
+            if exact and H_new is not None:
+                E, g, H = E_new, g_new, H_new
+            elif exact:
+                # small full step: test convergence with the previous factor (a chord step,
+                # one back-substitution) before assembling and factorising again; only an
+                # exact factor is a valid test (``exact`` stays that of the factor)
+                E, g = E_new, g_new
+                exact = F_exact
+                chord = -ns.solve(F, g)
+            else:
+                E, g, H = ns.evaluate(x, project=1)
+        return x, E, np.asarray(energies), it, converged, step_norm, 0
+
+    def newton_applicable(self) -> bool:
+        """Whether the Newton solver (and :meth:`sensitivity`) applies: eq. 9 is a true energy
+        (all body R_w = 1) and the sparse Cholesky back end is installed."""
+        return newton_available() and all(np.all(g.shape_parameter == 1.0) for g in self.groups if g.kind == 0)
+
+    def level_derivatives(self) -> np.ndarray:
+        """d sigma_a / d C_a: how the actuation level (uniform local ratio) of each actuator
+        changes with its actuation ratio (eq. 6: L m_c / sum l_i for cables; 1 otherwise)."""
+        out = np.ones(len(self.actuators))
+        for a, ad in enumerate(self.actuators):
+            if ad.kind == 'cable':
+                out[a] = ad.total_length * ad.multiplicity / ad.rest_measure.sum()
+        return out
+
+    def sensitivity(self, result: FKResult, reuse_tol: float = 1e-6) -> np.ndarray:
+        """Derivative of the deformed shape with respect to the actuation, dx/dC, by the
+        implicit function theorem: at a minimiser grad E(x, sigma) = 0, so
+        dx/dsigma = -H^{-1} d(grad E)/dsigma with the exact Hessian H of eq. 9 (:mod:`.newton`).
+
+        A slack cable whose gap is at (or beyond) its target length would tighten as soon as it
+        is pulled: its column is the one-sided derivative in the pulling direction, with that
+        cable taut and the others as they are (as a one-sided difference at s = 1); a cable
+        slack with room to spare gets zero.
+
+        Parameters
+        ----------
+        result : FKResult
+            A converged solve with the nominal levels (``enforce_constraints=False``) of a
+            problem with all R_w = 1.
+        reuse_tol : float
+            The Newton solve's last factorisation is reused when its Hessian was assembled
+            within this distance (m) of the result (else a fresh one is made; a predictor can
+            afford a large value, an IK Jacobian wants a small one).
+
+        Returns
+        -------
+        ndarray, shape (n_v, 3, n_a)
+            dx/dC (m per unit actuation ratio); fixed vertices have zero rows.
+        """
+        ns = self.newton_system()
+        x = result.positions
+        levels = np.asarray(result.levels, float)
+        base_active = np.asarray(result.active, bool)
+        got = self._totals(x)
+        na = len(self.actuators)
+        # column a is taken with actuator a taut if it is, or would tighten when pulled
+        # (a marginal slack cable); the other actuators keep their state
+        col_active = []
+        for a, ad in enumerate(self.actuators):
+            act_a = base_active.copy()
+            if ad.kind == 'cable' and not act_a[a]:
+                act_a[a] = got[a] >= levels[a] * ad.rest_measure.sum() * (1 - 1e-9)
+            col_active.append(act_a)
+        dl = self.level_derivatives()
+        dx = np.zeros((self.mesh.n_vertices, 3, na))
+        saved = self._active.copy()
+        try:
+            for key in {tuple(v) for v in col_active}:
+                cols = [a for a in range(na) if tuple(col_active[a]) == key and col_active[a][a]]
+                if not cols:
+                    continue
+                act_s = np.array(key, bool)
+                self._active = act_s
+                self._set_levels(levels)
+                F = self._sensitivity_factor(ns, x, levels, act_s, reuse_tol)
+                rhs = np.zeros((len(ns.free) * 3, len(cols)))
+                for j, a in enumerate(cols):
+                    grp = self.groups[self.actuators[a].group]
+                    out = np.zeros((self.mesh.n_vertices, 3))
+                    dgrad_dratio(x, grp.elements, grp.rest_centred, grp.kind, grp.ratios, grp.coef, ns.scale, out)
+                    rhs[:, j] = out[ns.free].ravel() * dl[a]
+                sol = -ns.solve(F, rhs).reshape(len(ns.free), 3, len(cols))
+                for j, a in enumerate(cols):
+                    dx[ns.free, :, a] = sol[:, :, j]
+        finally:
+            self._active = saved
+        return dx
+
+    def _sensitivity_factor(self, ns, x, levels, act_s, reuse_tol):
+        """Factor of the exact Hessian at ``x`` (reusing the last Newton factorisation when it
+        is exact, for this state, and assembled within ``reuse_tol`` of ``x``)."""
+        lf = self._last_factor
+        if (lf is not None and lf[0] == ns.version and lf[1] and lf[2] is x and lf[5] <= reuse_tol
+                and np.array_equal(lf[3], levels) and np.array_equal(lf[4], act_s)):
+            return ns._symbolic
+        _, _, H = ns.evaluate(x, project=0)
+        try:
+            return self._newton_factor(ns, H, shifts=0)
+        except ArithmeticError:  # not a strict minimiser: the projected Hessian
+            _, _, H = ns.evaluate(x, project=1)
+            return self._newton_factor(ns, H)
 
     def marker_position(self, actuation, name: str = 'tip', **kw) -> np.ndarray:
         """Convenience: solve and return one marker's position (m), shape (3,)."""

@@ -430,11 +430,13 @@ def scatter_rhs(elements, coef, targets, rhs):
             rhs[v, 2] += c * targets[i, j, 2]
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def element_measure_ratios(x, elements, kind, rest_measure):
     """Current-to-rest ratio of each actuation element's driven measure.
 
     Cable: length of edge a-b; DEA: mean area of the two triangles; pneumatic: volume.
+    (Serial: actuator groups are small, and a thread launch per call cost ~10 ms on a busy
+    2-core machine, more than the work.)
 
     Returns
     -------
@@ -442,7 +444,8 @@ def element_measure_ratios(x, elements, kind, rest_measure):
     """
     n = elements.shape[0]
     out = np.empty(n)
-    for i in nb.prange(n):
+    P = np.empty((4, 3))
+    for i in range(n):
         e = elements[i]
         if kind == 1:
             dx = x[e[1], 0] - x[e[0], 0]
@@ -463,7 +466,6 @@ def element_measure_ratios(x, elements, kind, rest_measure):
                 qz = ax * by - ay * bx
                 m += 0.25 * np.sqrt(qx * qx + qy * qy + qz * qz)
         else:
-            P = np.empty((4, 3))
             for j in range(4):
                 for c in range(3):
                     P[j, c] = x[e[j], c]
