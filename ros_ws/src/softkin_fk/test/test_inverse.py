@@ -13,13 +13,15 @@ def finger():
     return mesh, ForwardSolver(mesh)
 
 
-@pytest.mark.parametrize('direction', ['gradient', 'gauss-newton'])
-def test_ik_reaches_fk_generated_target(finger, direction):
-    """A target produced by FK from a known actuation is reached within lambda = 0.2 mm."""
+@pytest.mark.parametrize('direction,jacobian', [('gradient', 'central'), ('gauss-newton', 'central'),
+                                                ('gradient', 'implicit'), ('gauss-newton', 'implicit')])
+def test_ik_reaches_fk_generated_target(finger, direction, jacobian):
+    """A target produced by FK from a known actuation is reached within lambda = 0.2 mm, with
+    the paper's central-difference Jacobian and with the implicit (IFT) one."""
     mesh, fs = finger
     known = np.array([0.95, 0.97, 0.93])
     target = fs.solve(known, tol=1e-10).marker(mesh)
-    res = solve_ik(fs, target, direction=direction)
+    res = solve_ik(fs, target, direction=direction, jacobian=jacobian)
     assert res.success and not res.out_of_reach
     assert res.error <= 0.2e-3
     assert np.linalg.norm(res.reached[0] - target) <= 0.2e-3
@@ -54,3 +56,5 @@ def test_ik_rejects_bad_input(finger):
         solve_ik(fs, [0.1, 0.05])
     with pytest.raises(ValueError, match='tau'):
         solve_ik(fs, [0.1, 0.05, 0.0125], tau=1.5)
+    with pytest.raises(ValueError, match='jacobian'):
+        solve_ik(fs, [0.1, 0.05, 0.0125], jacobian='forward')

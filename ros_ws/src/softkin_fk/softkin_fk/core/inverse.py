@@ -7,7 +7,10 @@ targets, J(C) = sum_p ||v_p^d(C) - v_p^c||^2 (m^2), with v^d from forward kinema
 Per iteration (Algorithm 2):
 
 1. central differences of the marker positions give the Jacobian dv/dC, hence grad J (eq. 14);
-   at an actuation bound the difference is one-sided;
+   at an actuation bound the difference is one-sided (``jacobian='central'``, the paper). With
+   ``jacobian='implicit'`` the Jacobian is the exact derivative of the converged shape by the
+   implicit function theorem (one back-substitution with the Newton factorisation instead of
+   2 FK solves per actuator);
 2. search direction: ``-grad J`` (``direction='gradient'``, the paper) or the Gauss-Newton
    direction ``-(K^T K + mu I)^-1 K^T r`` from the same Jacobian K (``'gauss-newton'``; same
    cost per iteration, far fewer iterations near a target);
@@ -82,11 +85,17 @@ class _Objective:
         self.base = start
         self.n = 0
 
+        self.dx = None  # dx/dC at the base (implicit Jacobian): first-order warm starts
+
     def fk(self, c: np.ndarray) -> FKResult:
         self.n += 1
         b = self.base
-        return self.solver.solve(c, x0=None if b is None else b.positions, tol=self.fk_tol,
-                                 active0=None if b is None else b.active)
+        x0 = None if b is None else b.positions
+        if b is not None and self.dx is not None:
+            # predictor: the base shape moved along its sensitivity, so Newton starts within
+            # second-order distance of the solution
+            x0 = x0 + self.dx @ (np.asarray(c, float) - b.actuation)
+        return self.solver.solve(c, x0=x0, tol=self.fk_tol, active0=None if b is None else b.active)
 
     def value(self, res: FKResult) -> float:
         d = res.positions[self.markers] - self.target
@@ -96,7 +105,7 @@ class _Objective:
 def solve_ik(solver: ForwardSolver, target, markers: Sequence[str] = ('tip',), initial=None,
              initial_fk: Optional[FKResult] = None, lam: float = 0.2e-3, i_max: int = 30, tau: float = 0.1,
              delta: float = 2e-3, direction: str = 'gradient', fk_tol: float = 1e-7,
-             max_shrink: int = 8, max_expand: int = 30) -> IKResult:
+             max_shrink: int = 8, max_expand: int = 30, jacobian: str = 'central') -> IKResult:
     """Actuation that brings marker vertices to target positions (Algorithm 2).
 
     Parameters
@@ -126,6 +135,11 @@ def solve_ik(solver: ForwardSolver, target, markers: Sequence[str] = ('tip',), i
         ``delta`` for meaningful differences.
     max_shrink, max_expand : int
         Limits of the line search.
+    jacobian : {'central', 'implicit'}
+        'central': central differences of eq. 14 (the paper; 2 FK solves per actuator).
+        'implicit': the implicit-function-theorem sensitivity dx/dC = -H^{-1} d(grad E)/dC
+        of the converged shape (:meth:`ForwardSolver.sensitivity`; no extra FK solve; needs
+        all R_w = 1); it also gives the line search's FK solves a first-order warm start.
 
     Returns
     -------
@@ -147,6 +161,8 @@ def solve_ik(solver: ForwardSolver, target, markers: Sequence[str] = ('tip',), i
         raise ValueError(f"tau = {tau} must lie in (0, 1)")
     if direction not in ('gradient', 'gauss-newton'):
         raise ValueError(f"direction {direction!r} is not 'gradient' or 'gauss-newton'")
+    if jacobian not in ('central', 'implicit'):
+        raise ValueError(f"jacobian {jacobian!r} is not 'central' or 'implicit'")
     if lam <= 0 or i_max < 1 or delta <= 0:
         raise ValueError(f"need lam > 0, i_max >= 1, delta > 0; got {lam}, {i_max}, {delta}")
     lo = np.array([a.bounds[0] for a in mesh.actuators], float)
@@ -162,10 +178,15 @@ def solve_ik(solver: ForwardSolver, target, markers: Sequence[str] = ('tip',), i
     while np.sqrt(J) > lam and it < i_max:
         it += 1
         obj.base = cur
-        # Jacobian of the marker positions by (central) differences, eq. 14
+        obj.dx = None
         p0 = cur.positions[obj.markers].ravel()
         K = np.zeros((p0.size, na))
-        for a in range(na):
+        if jacobian == 'implicit':
+            dx = solver.sensitivity(cur)
+            obj.dx = dx
+            K = dx[obj.markers].reshape(p0.size, na)
+        # Jacobian of the marker positions by (central) differences, eq. 14
+        for a in range(na if jacobian == 'central' else 0):
             up, dn = min(c[a] + delta, hi[a]), max(c[a] - delta, lo[a])
             cu, cd = c.copy(), c.copy()
             cu[a], cd[a] = up, dn

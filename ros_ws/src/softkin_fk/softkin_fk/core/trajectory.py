@@ -50,7 +50,8 @@ class ConfigurationSpace:
 
 
 def sample_configuration_space(solver: ForwardSolver, n_per_axis: int = 5, marker: str = 'tip',
-                               fk_tol: float = 1e-6, progress: Optional[Callable] = None) -> ConfigurationSpace:
+                               fk_tol: float = 1e-5, progress: Optional[Callable] = None,
+                               predictor: bool = True) -> ConfigurationSpace:
     """Forward kinematics on an actuation grid (n_per_axis ** n_a samples), warm started.
 
     Parameters
@@ -62,7 +63,11 @@ def sample_configuration_space(solver: ForwardSolver, n_per_axis: int = 5, marke
         Tracked marker.
     fk_tol : float
         FK tolerance (m); the samples only seed IK (which re-solves at its own tolerance),
-        so 1 um is ample.
+        so 10 um is ample (the Newton solver's stop is a full Newton step below it, so the
+        actual error is far smaller).
+    predictor : bool
+        Warm start each sample from its neighbour moved along the implicit sensitivity
+        dx/dC (when the Newton solver applies: all R_w = 1), else from the neighbour itself.
     progress : callable, optional
         Called with the number of finished samples (e.g. a tqdm ``update``).
 
@@ -85,9 +90,18 @@ def sample_configuration_space(solver: ForwardSolver, n_per_axis: int = 5, marke
     grid = np.array(grid)
     results, points = [], []
     prev = None
+    predict = predictor and solver.newton_applicable()
     for c in grid:
-        r = solver.solve(c, x0=None if prev is None else prev.positions, tol=fk_tol,
-                         active0=None if prev is None else prev.active)
+        x0 = active0 = None
+        if prev is not None:
+            x0 = prev.positions
+            # a cable pulled further than in the neighbour starts taut
+            active0 = prev.active | (c < prev.actuation - 1e-12)
+            if predict:
+                # first-order predictor along the implicit sensitivity (reusing the Newton
+                # factorisation of the neighbour): Newton then starts within second order
+                x0 = x0 + solver.sensitivity(prev, reuse_tol=np.inf) @ (c - prev.actuation)
+        r = solver.solve(c, x0=x0, tol=fk_tol, active0=active0)
         results.append(r)
         points.append(r.marker(mesh, marker))
         prev = r
