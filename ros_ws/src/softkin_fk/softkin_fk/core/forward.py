@@ -12,18 +12,23 @@ secant correction of the levels so that eq. 6-8 hold exactly. (Correcting each e
 ratio from its *current* ratio, as Sec. II-D describes, leaves the distribution of closure
 among elements undetermined; in our tests it drifted without converging.)
 
-Solvers, both minimising eq. 9 with the same local step and factorisation:
+Solvers, all minimising eq. 9:
 
 * ``'local-global'``: Algorithm 1 as printed, optionally with Anderson acceleration kept only
   when a safeguard accepts it (energy does not increase, or the fixed-point residual does not
   grow when the targets depend on the iterate, R_w < 1).
-* ``'lbfgs'`` (default when all R_w = 1): L-BFGS whose initial inverse Hessian is the
-  factorised global matrix, so its first step *is* a local/global iteration; an Armijo test on
+* ``'newton'`` (default when all R_w = 1 and cvxopt is installed): projected Newton with an
+  energy line search and a sparse Cholesky of the assembled Hessian (:mod:`.newton`);
+  converges in a few iterations from a warm start, and provides :meth:`ForwardSolver.sensitivity`
+  (dx/dC by the implicit function theorem).
+* ``'lbfgs'`` (the default before Newton, and without cvxopt): L-BFGS whose initial inverse
+  Hessian is the factorised global matrix, so its first step *is* a local/global iteration; an Armijo test on
   the energy keeps it monotone. Thin bending structures need several times fewer iterations.
 
 Convergence: a linear-rate fixed-point map can take tiny steps far from its fixed point, so
 the local/global solver stops when ``step / (1 - rho)`` (rho: observed contraction) is below
-``tol`` (m); L-BFGS stops after three consecutive steps below ``tol``. This is strict enough
+``tol`` (m); L-BFGS stops after three consecutive steps below ``tol``; Newton when an exact
+Newton step is below ``tol`` (then the error is of second order). This is strict enough
 for finite-difference IK gradients (a loose "tip moved < 1e-3 mm" stop can halt degrees short
 after a warm start).
 
@@ -151,6 +156,9 @@ class ForwardSolver:
         self._last_factor = None
         #: local/global iterations after each trial Newton step (0: plain Newton)
         self.newton_correction = 1
+        #: test convergence by a chord step with the previous factor (cheaper, but it can
+        #: underestimate the distance where the Hessian changes fast along a soft mode)
+        self.newton_chord = False
         #: a list to receive (iteration, step length, max |d|, energy, exact Hessian) per Newton step
         self.newton_log = None
         x0 = mesh.vertices
@@ -354,7 +362,7 @@ class ForwardSolver:
             safeguard = 'energy' if variational else 'residual'
         if method == 'auto':
             if safeguard == 'energy' and accelerate:
-                method = 'newton' if newton_available() else 'lbfgs'
+                method = 'newton' if newton_available() and self.use_numba else 'lbfgs'
             else:
                 method = 'local-global'
         if method not in ('newton', 'lbfgs', 'local-global'):
@@ -367,7 +375,8 @@ class ForwardSolver:
         levels = self.initial_levels(act) if levels0 is None else np.array(levels0, float)
         def inner(xs, lvs):
             if method == 'newton':
-                return self._newton_solve(xs, lvs, fpos, tol, max_iter, min_iter, record_energy)
+                return self._newton_solve(xs, lvs, fpos, tol, max_iter, min_iter, record_energy,
+                                          warm=x0 is not None)
             if method == 'lbfgs':
                 return self._lbfgs_solve(xs, lvs, fpos, tol, max_iter, min_iter, window, record_energy)
             return self._inner_solve(xs, lvs, fpos, tol, max_iter, min_iter, accelerate, window, safeguard,
@@ -623,32 +632,36 @@ class ForwardSolver:
                 shift = 1e-10 * float(np.mean(H[diag])) if shift == 0.0 else 100.0 * shift
         raise ArithmeticError("Newton Hessian could not be factorised")
 
-    def _newton_solve(self, x, levels, fpos, tol, max_iter, min_iter, record_energy):
+    def _newton_solve(self, x, levels, fpos, tol, max_iter, min_iter, record_energy, warm=False):
         """Newton on eq. 9 with fixed actuation levels (all R_w = 1), globalised by an Armijo
         backtracking line search on the energy (so the energy never increases).
 
-        Hessian: after a damped step each element Hessian is projected onto PSD (exactly, in
-        its 3-dim rotation subspace, see :mod:`.newton`) so the direction descends; after a
-        full step the exact Hessian is tried first (compressed elements are indefinite on
-        their own, but the assembled Hessian is positive definite near a strict minimiser),
-        which restores quadratic convergence; if its Cholesky fails or its direction does not
-        descend, the projected one is used.
+        Hessian: from rest and after a damped step each element Hessian is projected onto PSD
+        (exactly, in its 3-dim rotation subspace, see :mod:`.newton`) so the direction
+        descends; from a warm start and after a full step the exact Hessian is tried first
+        (compressed elements are indefinite on their own, but the assembled Hessian is
+        positive definite near a strict minimiser), which restores quadratic convergence; if
+        its Cholesky fails or its direction does not descend, the projected one is used.
 
-        Each trial point x + alpha d is followed by ``newton_correction`` local/global
-        iterations (cheap: back-substitutions with the factor of eq. 10) before the energy
-        test: a linear step along a large rotation stretches elements, and one local/global
-        iteration re-fits the rotations; on the 240-degree bender this halves the Newton
-        iterations. If no corrected trial passes, the plain line search is used.
+        Each trial point x + alpha d of a step longer than a tenth of an element is followed
+        by ``newton_correction`` local/global iterations (cheap: back-substitutions with the
+        factor of eq. 10) before the energy test: a linear step along a large rotation
+        stretches elements, and one local/global iteration re-fits the rotations; on the
+        240-degree bender this halves the Newton iterations. If no corrected trial passes, the plain line search is used.
 
-        Converged when a full Newton step moves no coordinate by more than ``tol`` (m).
+        Converged when a Newton step with the exact Hessian moves no coordinate by more than
+        ``tol`` (m): the remaining error is then of second order (a step by a projected
+        Hessian is no proof: it is stiffer than the true one along soft modes). On a saddle
+        (exact Hessian indefinite) projected steps are all there is and count. The loop also
+        stops when the energy stagnates at round-off.
         Returns like :meth:`_inner_solve`."""
         ns = self.newton_system()
         self._set_levels(levels)
         free = ns.free
         x = x.copy()
         x[self.global_solver.fixed] = fpos
-        exact = False
-        E, g, H = ns.evaluate(x, project=1)
+        exact = warm  # a warm start is usually close: try the exact Hessian first
+        E, g, H = ns.evaluate(x, project=0 if exact else 1)
         energies = [E] if record_energy else []
         converged = False
         step_norm = np.inf
@@ -656,7 +669,7 @@ class ForwardSolver:
         chord = None      # direction from the previous factor at the current x (cheap convergence test)
         x_H = x           # where the current factor's Hessian was assembled
         # a local/global correction pays only for steps that are not small against an element
-        corr_min = 0.02 * ns.scale
+        corr_min = 0.1 * ns.scale
         stalled = 0
         while it < max_iter:
             it += 1
@@ -716,7 +729,9 @@ class ForwardSolver:
                 break
             accepted = False
             H_new = None
-            fused = step_norm > 100.0 * tol  # the next iteration will need a Hessian anyway
+            # after a full step the next iteration (or the convergence test) needs the exact
+            # Hessian there anyway: assemble it with the energy test
+            fused = not self.newton_chord or step_norm > 100.0 * tol
             for corr in ((self.newton_correction, 0) if self.newton_correction and step_norm > corr_min else (0,)):
                 alpha = 1.0
                 for _ in range(40):
@@ -751,21 +766,25 @@ class ForwardSolver:
             exact = alpha == 1.0
             if exact and H_new is not None:
                 E, g, H = E_new, g_new, H_new
-            elif exact:
+            elif exact and self.newton_chord:
                 # small full step: test convergence with the previous factor (a chord step,
                 # one back-substitution) before assembling and factorising again; only an
                 # exact factor is a valid test (``exact`` stays that of the factor)
                 E, g = E_new, g_new
                 exact = F_exact
                 chord = -ns.solve(F, g)
+            elif exact:
+                E, g, H = ns.evaluate(x, project=0)
             else:
                 E, g, H = ns.evaluate(x, project=1)
         return x, E, np.asarray(energies), it, converged, step_norm, 0
 
     def newton_applicable(self) -> bool:
         """Whether the Newton solver (and :meth:`sensitivity`) applies: eq. 9 is a true energy
-        (all body R_w = 1) and the sparse Cholesky back end is installed."""
-        return newton_available() and all(np.all(g.shape_parameter == 1.0) for g in self.groups if g.kind == 0)
+        (all body R_w = 1), the sparse Cholesky back end is installed, and the numba kernels
+        are in use (``use_numba=False`` is the plain-numpy baseline: local/global, L-BFGS)."""
+        return (newton_available() and self.use_numba
+                and all(np.all(g.shape_parameter == 1.0) for g in self.groups if g.kind == 0))
 
     def level_derivatives(self) -> np.ndarray:
         """d sigma_a / d C_a: how the actuation level (uniform local ratio) of each actuator
@@ -776,7 +795,7 @@ class ForwardSolver:
                 out[a] = ad.total_length * ad.multiplicity / ad.rest_measure.sum()
         return out
 
-    def sensitivity(self, result: FKResult, reuse_tol: float = 1e-6) -> np.ndarray:
+    def sensitivity(self, result: FKResult, reuse_tol: float = 1e-6, one_sided: bool = True) -> np.ndarray:
         """Derivative of the deformed shape with respect to the actuation, dx/dC, by the
         implicit function theorem: at a minimiser grad E(x, sigma) = 0, so
         dx/dsigma = -H^{-1} d(grad E)/dsigma with the exact Hessian H of eq. 9 (:mod:`.newton`).
@@ -795,6 +814,10 @@ class ForwardSolver:
             The Newton solve's last factorisation is reused when its Hessian was assembled
             within this distance (m) of the result (else a fresh one is made; a predictor can
             afford a large value, an IK Jacobian wants a small one).
+        one_sided : bool
+            Give marginal slack cables their pulling derivative (a Hessian per such column);
+            False keeps every actuator as the solve left it (slack columns are zero), so the
+            solve's last factorisation serves all columns (enough for a predictor).
 
         Returns
         -------
@@ -812,7 +835,7 @@ class ForwardSolver:
         col_active = []
         for a, ad in enumerate(self.actuators):
             act_a = base_active.copy()
-            if ad.kind == 'cable' and not act_a[a]:
+            if one_sided and ad.kind == 'cable' and not act_a[a]:
                 act_a[a] = got[a] >= levels[a] * ad.rest_measure.sum() * (1 - 1e-9)
             col_active.append(act_a)
         dl = self.level_derivatives()

@@ -100,7 +100,7 @@ def sample_configuration_space(solver: ForwardSolver, n_per_axis: int = 5, marke
             if predict:
                 # first-order predictor along the implicit sensitivity (reusing the Newton
                 # factorisation of the neighbour): Newton then starts within second order
-                x0 = x0 + solver.sensitivity(prev, reuse_tol=np.inf) @ (c - prev.actuation)
+                x0 = x0 + solver.sensitivity(prev, reuse_tol=np.inf, one_sided=False) @ (c - prev.actuation)
         r = solver.solve(c, x0=x0, tol=fk_tol, active0=active0)
         results.append(r)
         points.append(r.marker(mesh, marker))
