@@ -647,7 +647,8 @@ class ForwardSolver:
         by ``newton_correction`` local/global iterations (cheap: back-substitutions with the
         factor of eq. 10) before the energy test: a linear step along a large rotation
         stretches elements, and one local/global iteration re-fits the rotations; on the
-        240-degree bender this halves the Newton iterations. If no corrected trial passes, the plain line search is used.
+        240-degree bender this halves the Newton iterations. If no corrected trial passes, the
+        plain line search is used.
 
         Converged when a Newton step with the exact Hessian moves no coordinate by more than
         ``tol`` (m): the remaining error is then of second order (a step by a projected
