@@ -50,7 +50,7 @@ class ConfigurationSpace:
 
 
 def sample_configuration_space(solver: ForwardSolver, n_per_axis: int = 5, marker: str = 'tip',
-                               fk_tol: float = 1e-5, progress: Optional[Callable] = None,
+                               fk_tol: float = 1e-4, progress: Optional[Callable] = None,
                                predictor: bool = True) -> ConfigurationSpace:
     """Forward kinematics on an actuation grid (n_per_axis ** n_a samples), warm started.
 
@@ -62,9 +62,10 @@ def sample_configuration_space(solver: ForwardSolver, n_per_axis: int = 5, marke
     marker : str
         Tracked marker.
     fk_tol : float
-        FK tolerance (m); the samples only seed IK (which re-solves at its own tolerance),
-        so 10 um is ample (the Newton solver's stop is a full Newton step below it, so the
-        actual error is far smaller).
+        FK tolerance (m); the samples only seed IK (which re-solves at its own tolerance).
+        The Newton solver stops after applying an exact Newton step shorter than this, so the
+        error left is of second order: at 0.1 mm the 125 finger samples deviate at most
+        1.6e-7 m from solves at 1e-10 m (the L-BFGS / local-global solvers are looser).
     predictor : bool
         Warm start each sample from its neighbour moved along the implicit sensitivity
         dx/dC (when the Newton solver applies: all R_w = 1), else from the neighbour itself.
