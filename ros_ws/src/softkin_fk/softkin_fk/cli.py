@@ -373,7 +373,7 @@ def cmd_workspace(args):
             errs, its, reached, starts = [], [], [], []
             for i in tqdm(idx, desc=f'IK {name}', disable=args.quiet):
                 # independent solves (no warm start from the previous waypoint) from the nearest
-                # samples' actuations; FK is re-solved at IK's tolerance (the samples are looser).
+                # samples' actuations; FK is re-solved at IK's own tolerance.
                 # A further start only when IK stalls in a local minimum at the actuation bounds.
                 order = np.argsort(np.linalg.norm(cs.points - P[i], axis=1))[:max(args.ik_starts, 1)]
                 best = None
@@ -502,8 +502,7 @@ def build_parser():
     sp.add_argument('--ik-every', type=int, default=0,
                     help='run IK (from the nearest sample) on every k-th waypoint of each curve; 0 = no IK')
     sp.add_argument('--fk-tol', type=float, default=1e-9,
-                    help='FK tolerance (m) of the samples, default 1e-9: the samples draw the workspace boundary '
-                         '(at 1e-6, the trajectory default for IK seeds, tips can be off by 0.1-1 mm)')
+                    help='FK tolerance (m) of the samples, default 1e-9: they draw the workspace boundary')
     sp.add_argument('--ik-starts', type=int, default=3,
                     help='IK starts per checked waypoint: the nearest samples, tried in turn (default 3)')
     sp.add_argument('--lam-mm', type=float, default=0.2, help='IK threshold (mm)')

@@ -19,13 +19,12 @@ at 0.05 mm, is the workspace (:func:`workspace_region`). It is a curved band fro
 (120, 25) mm to about (71, 76) mm, up to 11.2 mm wide (largest inscribed circle: radius 5.6 mm
 at (98.8, 57.4) mm): the finger's three cables all pull on its upper side. The curves keep
 their proportions from the paper's figure and were positioned (and the 'L' sized) by a grid
-search for the largest distance of all curve points from the boundary, rounded to 0.5 mm
-(on samples at the trajectory's 1 um FK tolerance; the margins above are from samples
-converged to 1e-9 m -- the looser samples put the tip 0.05-1 mm off).
+search for the largest distance of all curve points from the boundary, rounded to 0.5 mm;
+the margins above are from samples converged to 1e-9 m.
 
 Check (``softkin workspace --ik-every 5``: FK samples at 1e-9 m, then independent
 Gauss-Newton IK on every 5th waypoint from the nearest sample's actuation): 'L' 11/11
-waypoints within lambda = 0.2 mm (largest error 0.050 mm), 'flame' 17/17 (largest 0.162 mm),
+waypoints within lambda = 0.2 mm (largest error 0.072 mm), 'flame' 17/17 (largest 0.183 mm),
 each from the first start. The command draws ``runs/softkin/workspace/curves_workspace.png``
 (samples, boundary-distance shading, both curves, IK results).
 """
