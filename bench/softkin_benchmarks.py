@@ -139,7 +139,8 @@ def bench_ik(reps, resolution, curves=('L', 'flame'), jacobians=('implicit', 'ce
     t_cs_np = w_np * 125 / 8
     its = sum(r.iterations for r in cs.results)
     # accuracy of the samples: re-solve every 25th tightly from its own shape
-    dev = max(float(np.abs(fs.solve(cs.actuations[k], x0=cs.results[k].positions, tol=1e-10).positions
+    dev = max(float(np.abs(fs.solve(cs.actuations[k], x0=cs.results[k].positions, tol=1e-10,
+                                    active0=cs.results[k].active).positions
                            - cs.results[k].positions).max()) for k in range(0, len(cs.results), 25))
     out.append(line('config_space', statistics.median(walls), t_cs_np,
                     f'(125 samples, res {resolution}, {its} Newton iterations, FK tol 0.1 mm, samples within '
