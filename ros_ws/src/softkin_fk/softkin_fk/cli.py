@@ -180,7 +180,7 @@ def cmd_ik(args):
     t0 = time.perf_counter()
     try:
         res = solve_ik(fs, target, markers=(marker,), lam=args.lam_mm * MM, i_max=args.i_max,
-                       direction=args.direction)
+                       direction=args.direction, jacobian=args.jacobian)
     except ValueError as exc:
         raise CliError(str(exc))
     elapsed = time.perf_counter() - t0
@@ -235,7 +235,7 @@ def cmd_trajectory(args):
     t1 = time.perf_counter()
     with tqdm(total=len(P), desc=f'trajectory {name}', disable=args.quiet) as bar:
         tr = follow_trajectory(fs, P, cs, marker=marker, progress=bar.update, lam=args.lam_mm * MM,
-                               direction=args.direction)
+                               direction=args.direction, jacobian=args.jacobian)
     t_tr = time.perf_counter() - t1
     out = _outdir(args, f'trajectory_{name}')
     _write_json(os.path.join(out, 'result.json'), dict(
@@ -477,10 +477,14 @@ def build_parser():
     sp.add_argument('--i-max', type=int, default=30, help='iteration limit, default 30')
     sp.add_argument('--direction', default='gauss-newton', choices=['gradient', 'gauss-newton'],
                     help="search direction: the paper's gradient or Gauss-Newton (default)")
+    sp.add_argument('--jacobian', default='central', choices=['central', 'implicit'],
+                    help="IK gradient: the paper's central differences (default) or the implicit-function "
+                         "sensitivity (same gradient to ~1e-7, one solve with the FK factorisation; 3-4x faster)")
     sp.set_defaults(func=cmd_ik)
 
     sp = sub.add_parser('trajectory', help='trajectory following (Algorithm 3)',
-                        epilog='examples: softkin trajectory --curve flame; softkin trajectory --csv pts.csv')
+                        epilog='examples: softkin trajectory --curve flame; softkin trajectory --csv pts.csv;\n'
+                               '  softkin trajectory --curve L --jacobian implicit')
     common(sp, 'trajectory')
     sp.add_argument('--marker', default='tip', help="tracked marker (default 'tip')")
     sp.add_argument('--curve', default='L', help="built-in curve: 'L' (N=55) or 'flame' (N=85)")
@@ -490,6 +494,9 @@ def build_parser():
     sp.add_argument('--samples', type=int, default=5, help='configuration samples per cable (default 5: 125)')
     sp.add_argument('--lam-mm', type=float, default=0.2, help='IK threshold (mm)')
     sp.add_argument('--direction', default='gauss-newton', choices=['gradient', 'gauss-newton'])
+    sp.add_argument('--jacobian', default='central', choices=['central', 'implicit'],
+                    help="IK gradient: the paper's central differences (default) or the implicit-function "
+                         "sensitivity (same gradient to ~1e-7, one solve with the FK factorisation; 3-4x faster)")
     sp.set_defaults(func=cmd_trajectory)
 
     sp = sub.add_parser('workspace', help="finger tip workspace with the built-in curves (PNG) and an IK check",

@@ -48,3 +48,21 @@ def test_fk_mesh_out_writes_a_gmsh_file_meshio_reads(tmp_path):
     assert rc == 0
     m = meshio.read(str(path))
     assert sorted({c.type for c in m.cells}) == ['tetra', 'triangle'] and len(m.points) == 450
+
+
+def test_ik_jacobians_agree_through_the_cli(tmp_path, capsys):
+    """`softkin ik --jacobian implicit|central`: both reach a target inside the workspace
+    within lambda, and land on the same actuation to IK tolerance (the implicit sensitivity
+    is the same gradient as central differences)."""
+    results = {}
+    for jac in ('central', 'implicit'):
+        out = tmp_path / jac
+        rc = main(['ik', '--resolution', '1', '--target-mm', '100', '54', '12.5', '--jacobian', jac,
+                   '--out', str(out), '--quiet'])
+        assert rc == 0
+        capsys.readouterr()
+        results[jac] = json.loads(next(out.rglob('result.json')).read_text())
+    for r in results.values():
+        assert r['success'] and r['error_m'] <= 0.2e-3
+    reached = [np.asarray(results[j]['reached']) for j in ('central', 'implicit')]
+    assert np.linalg.norm(reached[0] - reached[1]) < 0.4e-3
