@@ -29,6 +29,48 @@ KIND_CODES = {'body': 0, 'cable': 1, 'dea': 2, 'pneumatic': 3}
 
 
 @nb.njit(cache=True, fastmath=False, inline='always')
+def jacobi_sweeps(A, Q, max_sweeps, rel_tol, scale):
+    """Cyclic Jacobi rotations diagonalising a symmetric 3x3 ``A`` in place, accumulated into
+    ``Q`` (the caller initialises it, usually to I); stops when the squared off-diagonal
+    falls below ``rel_tol * scale**2``."""
+    for sweep in range(max_sweeps):
+        off = A[0, 1] * A[0, 1] + A[0, 2] * A[0, 2] + A[1, 2] * A[1, 2]
+        if off <= rel_tol * scale * scale:
+            break
+        for pq in range(3):
+            if pq == 0:
+                p, q = 0, 1
+            elif pq == 1:
+                p, q = 0, 2
+            else:
+                p, q = 1, 2
+            apq = A[p, q]
+            if abs(apq) <= 1e-300:
+                continue
+            theta = (A[q, q] - A[p, p]) / (2.0 * apq)
+            t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
+            if theta < 0.0:
+                t = -t
+            c = 1.0 / np.sqrt(t * t + 1.0)
+            s = t * c
+            for k in range(3):
+                akp = A[k, p]
+                akq = A[k, q]
+                A[k, p] = c * akp - s * akq
+                A[k, q] = s * akp + c * akq
+            for k in range(3):
+                apk = A[p, k]
+                aqk = A[q, k]
+                A[p, k] = c * apk - s * aqk
+                A[q, k] = s * apk + c * aqk
+            for k in range(3):
+                qkp = Q[k, p]
+                qkq = Q[k, q]
+                Q[k, p] = c * qkp - s * qkq
+                Q[k, q] = s * qkp + c * qkq
+
+
+@nb.njit(cache=True, fastmath=False, inline='always')
 def _polar_rotation(M, S, V, R):
     """Rotation R (3x3, det +1) maximising trace(R^T M); S, V are 3x3 scratch arrays."""
     for a in range(3):
@@ -44,41 +86,7 @@ def _polar_rotation(M, S, V, R):
             for b in range(3):
                 R[a, b] = 1.0 if a == b else 0.0
         return
-    for sweep in range(12):
-        off = S[0, 1] * S[0, 1] + S[0, 2] * S[0, 2] + S[1, 2] * S[1, 2]
-        if off <= 1e-30 * scale * scale:
-            break
-        for pq in range(3):
-            if pq == 0:
-                p, q = 0, 1
-            elif pq == 1:
-                p, q = 0, 2
-            else:
-                p, q = 1, 2
-            apq = S[p, q]
-            if abs(apq) <= 1e-300:
-                continue
-            theta = (S[q, q] - S[p, p]) / (2.0 * apq)
-            t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
-            if theta < 0.0:
-                t = -t
-            c = 1.0 / np.sqrt(t * t + 1.0)
-            s = t * c
-            for k in range(3):
-                skp = S[k, p]
-                skq = S[k, q]
-                S[k, p] = c * skp - s * skq
-                S[k, q] = s * skp + c * skq
-            for k in range(3):
-                spk = S[p, k]
-                sqk = S[q, k]
-                S[p, k] = c * spk - s * sqk
-                S[q, k] = s * spk + c * sqk
-            for k in range(3):
-                vkp = V[k, p]
-                vkq = V[k, q]
-                V[k, p] = c * vkp - s * vkq
-                V[k, q] = s * vkp + c * vkq
+    jacobi_sweeps(S, V, 12, 1e-30, scale)
     # order eigenvalues descending
     i0, i1, i2 = 0, 1, 2
     if S[i0, i0] < S[i1, i1]:

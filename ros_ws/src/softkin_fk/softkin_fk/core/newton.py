@@ -30,6 +30,8 @@ import numba as nb
 import numpy as np
 import scipy.sparse as sp
 
+from .local_step import jacobi_sweeps
+
 try:
     from cvxopt import cholmod as _cholmod
     from cvxopt import matrix as _cvx_matrix
@@ -48,41 +50,7 @@ def _sym_eig3(A, w, Q):
         for b in range(3):
             Q[a, b] = 1.0 if a == b else 0.0
     scale = abs(A[0, 0]) + abs(A[1, 1]) + abs(A[2, 2]) + abs(A[0, 1]) + abs(A[0, 2]) + abs(A[1, 2])
-    for sweep in range(30):
-        off = A[0, 1] * A[0, 1] + A[0, 2] * A[0, 2] + A[1, 2] * A[1, 2]
-        if off <= 1e-34 * scale * scale or scale == 0.0:
-            break
-        for pq in range(3):
-            if pq == 0:
-                p, q = 0, 1
-            elif pq == 1:
-                p, q = 0, 2
-            else:
-                p, q = 1, 2
-            apq = A[p, q]
-            if abs(apq) <= 1e-300:
-                continue
-            theta = (A[q, q] - A[p, p]) / (2.0 * apq)
-            t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
-            if theta < 0.0:
-                t = -t
-            c = 1.0 / np.sqrt(t * t + 1.0)
-            s = t * c
-            for k in range(3):
-                akp = A[k, p]
-                akq = A[k, q]
-                A[k, p] = c * akp - s * akq
-                A[k, q] = s * akp + c * akq
-            for k in range(3):
-                apk = A[p, k]
-                aqk = A[q, k]
-                A[p, k] = c * apk - s * aqk
-                A[q, k] = s * apk + c * aqk
-            for k in range(3):
-                qkp = Q[k, p]
-                qkq = Q[k, q]
-                Q[k, p] = c * qkp - s * qkq
-                Q[k, q] = s * qkp + c * qkq
+    jacobi_sweeps(A, Q, 30, 1e-34, scale)
     for a in range(3):
         w[a] = A[a, a]
 
