@@ -85,3 +85,16 @@ def test_builtin_curves_reached_at_default_resolution():
     for p in (L[0], L[-1], F[19], F[63]):
         r = solve_ik(fs, p, initial=mid, direction='gauss-newton')
         assert r.error <= 0.2e-3, (p, r.error)
+
+
+@pytest.mark.parametrize("jacobian", ["central", "implicit"])
+def test_L_start_is_reached_from_the_configuration_space(jacobian):
+    """Algorithm 3 on the first 'L' waypoints at the default resolution. From the nearest
+    sample the IK used to stall at 0.39 mm on waypoint 0 (a cable at its rest length, s = 1,
+    can sit slack or taut); the retry from a fresh FK solve, then with that cable pulled just
+    taut, must reach every waypoint within lambda."""
+    fs = ForwardSolver(build_tendon_finger())
+    cs = sample_configuration_space(fs, 5)
+    tr = follow_trajectory(fs, curve_L()[:4], cs, direction='gauss-newton', jacobian=jacobian)
+    assert tr.reached_flags.all(), tr.errors
+    assert tr.errors.max() <= 0.2e-3

@@ -167,15 +167,26 @@ def follow_trajectory(solver: ForwardSolver, waypoints, config_space: Optional[C
         c, fk = config_space.actuations[k], config_space.results[k]
     else:
         c, fk = None, None
+    lam = ik_kw.get('lam', 0.2e-3)
     iks = []
     for p in P:
         r = solve_ik(solver, p, markers=(marker,), initial=c, initial_fk=fk, **ik_kw)
+        if fk is not None and r.error > lam:
+            # A warm start is only a seed: a sample's shape has a loose tolerance, and a cable at
+            # its rest length (s = 1, the bound) can sit slack or taut, where the search stalls.
+            # Retry from a fresh FK solve of the same actuation, then with slack cables pulled
+            # just off the bound, and keep the best result.
+            hi = np.array([a.bounds[1] for a in solver.mesh.actuators], float)
+            for start in (c, np.minimum(c, hi - 1e-3)):     # as is; slack cables pulled just taut
+                retry = solve_ik(solver, p, markers=(marker,), initial=start, **ik_kw)
+                r = retry if retry.error < r.error else r
+                if r.error <= lam:
+                    break
         iks.append(r)
         c, fk = r.actuation, r.fk
         if progress is not None:
             progress(1)
     reached = np.array([r.reached[0] for r in iks])
-    lam = ik_kw.get('lam', 0.2e-3)
     errors = np.linalg.norm(reached - P, axis=1)
     return TrajectoryResult(targets=P, reached=reached, actuations=np.array([r.actuation for r in iks]),
                             errors=errors, reached_flags=errors <= lam,
