@@ -19,6 +19,7 @@ setup(
     entry_points={
         'console_scripts': [
             'softkin = softkin_fk.cli:main',
+            'kinematics_node = softkin_fk.nodes.kinematics_node:main',
         ],
     },
 )

@@ -161,6 +161,10 @@ class ForwardSolver:
         self.newton_chord = False
         #: a list to receive (iteration, step length, max |d|, energy, exact Hessian) per Newton step
         self.newton_log = None
+        #: a cable at its rest length (s = 1) that a solve leaves slack but stretched beyond its
+        #: length goes taut (its motor holds it). Off by default: s = 1 then stays slack, which
+        #: admits paths up to ~3 % longer than the cable when proximal knuckles bend the finger.
+        self.hold_rest_cables = False
         x0 = mesh.vertices
         self.groups: List[_Group] = []
         blocks = []
@@ -406,7 +410,7 @@ class ForwardSolver:
                 if self._active[a] and got[a] < levels[a] * sums[a] * (1 - 1e-6):
                     self._active[a] = False
                     changed = True
-                elif not self._active[a] and stretched and levels[a] < 1.0:
+                elif not self._active[a] and stretched and (levels[a] < 1.0 or self.hold_rest_cables):
                     self._active[a] = True
                     changed = True
             if not changed:

@@ -138,7 +138,9 @@ class TrajectoryResult:
 
 
 def follow_trajectory(solver: ForwardSolver, waypoints, config_space: Optional[ConfigurationSpace] = None,
-                      marker: str = 'tip', progress: Optional[Callable] = None, **ik_kw) -> TrajectoryResult:
+                      marker: str = 'tip', progress: Optional[Callable] = None,
+                      on_waypoint: Optional[Callable[[int, IKResult], Optional[bool]]] = None,
+                      **ik_kw) -> TrajectoryResult:
     """Algorithm 3: IK for each waypoint, the first from the nearest sample, then warm starts.
 
     Parameters
@@ -151,6 +153,9 @@ def follow_trajectory(solver: ForwardSolver, waypoints, config_space: Optional[C
     marker : str
     progress : callable, optional
         Called with 1 after each waypoint.
+    on_waypoint : callable, optional
+        Called as ``on_waypoint(index, ik_result)`` after each waypoint; returning False stops
+        the trajectory there (a cancel): the result then holds the waypoints done so far.
     **ik_kw
         Passed to :func:`~softkin_fk.core.inverse.solve_ik` (``lam``, ``i_max``,
         ``direction``, ...).
@@ -186,6 +191,9 @@ def follow_trajectory(solver: ForwardSolver, waypoints, config_space: Optional[C
         c, fk = r.actuation, r.fk
         if progress is not None:
             progress(1)
+        if on_waypoint is not None and on_waypoint(len(iks) - 1, r) is False:
+            break
+    P = P[:len(iks)]
     reached = np.array([r.reached[0] for r in iks])
     errors = np.linalg.norm(reached - P, axis=1)
     return TrajectoryResult(targets=P, reached=reached, actuations=np.array([r.actuation for r in iks]),
