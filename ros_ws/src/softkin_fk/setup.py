@@ -20,6 +20,8 @@ setup(
         'console_scripts': [
             'softkin = softkin_fk.cli:main',
             'kinematics_node = softkin_fk.nodes.kinematics_node:main',
+            'stepper_driver = softkin_fk.nodes.stepper_driver:main',
+            'marlin_emulator = softkin_fk.nodes.marlin_emulator:main',
         ],
     },
 )

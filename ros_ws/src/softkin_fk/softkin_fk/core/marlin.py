@@ -155,12 +155,6 @@ class GcodeSender:
     def enqueue(self, command: str) -> None:
         self.pending.append(command)
 
-    def clear_pending(self) -> int:
-        """Drop commands not yet written (an emergency stop); return how many."""
-        n = len(self.pending)
-        self.pending.clear()
-        return n
-
     def sendable(self) -> List[str]:
         """Framed lines to write now (the window allowing); they count as in flight."""
         out = []
@@ -182,15 +176,30 @@ class GcodeSender:
             out.append(frame_line(n, cmd))
         return out
 
+    def send_unnumbered(self, command: str) -> str:
+        """``command`` for writing at once, past the window and the queue, without a line
+        number (``M410``: Marlin acts on it when it arrives); its ``ok`` is counted as usual."""
+        self.in_flight.append(-1)     # never refused, never resent
+        return command
+
+    def abort(self) -> int:
+        """Drop everything not yet taken by the board (queued and to-be-resent lines) and
+        re-synchronise the numbering with ``M110``; return how many commands were dropped."""
+        n = len(self.pending) + len(self.retry)
+        self.pending.clear()
+        self.retry.clear()
+        self.pending.append(f"M110 N{self.next_number}")
+        return n
+
     def in_flight_commands(self) -> List[str]:
-        return [self.sent[n] for n in self.in_flight if n in self.sent]
+        return [self.sent.get(n, 'unnumbered') for n in self.in_flight]
 
     def on_ok(self) -> Optional[str]:
         """An ``ok``: the oldest line in flight is acknowledged; return its command (or None)."""
         if not self.in_flight:
             return None   # an extra ok (Marlin 1 sends one after Resend)
         n = self.in_flight.popleft()
-        return self.sent.get(n)
+        return self.sent.get(n, 'unnumbered')
 
     def on_resend(self, number: int) -> bool:
         """``Resend: number``: send lines from ``number`` again; False if it is no longer known."""

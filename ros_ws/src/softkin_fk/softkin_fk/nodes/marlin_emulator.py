@@ -1,0 +1,212 @@
+"""marlin_emulator: a Marlin board behind a pseudo-terminal, for the finger's twin and tests.
+
+Creates a pty pair and links its device to ``port_link`` (a stable path the stepper driver
+opens like the board's USB serial port); speaks the protocol of ``core.marlin_board`` with
+moves that take the time their feedrate implies. Publishes ``finger/emulator/motor_state``
+(JointState at ``publish_rate``: each cable's pull [m] and speed [m/s] from the motors'
+*physical* positions) and ``finger/emulator/move_end`` (the same at the end of every move);
+FK of those pulls is the tip the finger actually reaches.
+
+Faults on demand (std_srvs/Trigger): ``~/reset`` (the board resets: banner, counts and line
+numbers to 0, motors stay), ``~/inject_error`` (an ``Error:`` line), ``~/corrupt_next_line``
+(the next numbered line fails its checksum), ``~/garbage`` (random bytes on the line),
+``~/unplug`` and ``~/replug`` (the device disappears / comes back as a new pty).
+"""
+from __future__ import annotations
+
+import os
+import select
+import threading
+import time
+import tty
+
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from std_srvs.srv import Trigger
+
+from ..core.marlin_board import MarlinBoard
+from ..core.stepper import CableMotorMap
+
+PARAMS = [
+    Param("port_link", "/tmp/softkin_marlin", "path of a symlink to the emulated board's serial device"),
+    Param("joints", ["cable_0", "cable_1", "cable_2"], "cable (joint) names, one per axis"),
+    Param("axes", ["X", "Y", "Z"], "Marlin axis letter of each cable"),
+    Param("pulley_radius", 0.005, "radius the cables wind on [m]", min=1e-4, max=0.1),
+    Param("steps_per_rev", 200, "full steps per motor revolution", min=1, max=10000),
+    Param("microsteps", 16, "driver microstepping", min=1, max=256),
+    Param("steps_per_unit", 80.0, "board microsteps per axis unit (M92)", min=1e-3, max=5000.0),
+    Param("buffer_size", 16, "planner moves held at once (Marlin BLOCK_BUFFER_SIZE)", min=1, max=64),
+    Param("publish_rate", 50.0, "rate of finger/emulator/motor_state [Hz]", min=1.0, max=500.0),
+    Param("transcript", "", "file to append every received line to (with a time stamp); empty = none"),
+]
+
+
+class MarlinEmulator(Node):
+    NODE_NAME = "marlin_emulator"
+
+    def __init__(self):
+        super().__init__(self.NODE_NAME)
+        p = self.p = declare_parameters(self, PARAMS)
+        self.map = CableMotorMap(joints=list(p["joints"]), axes=list(p["axes"]), pulley_radius=p["pulley_radius"],
+                                 steps_per_rev=p["steps_per_rev"], microsteps=p["microsteps"],
+                                 steps_per_unit=p["steps_per_unit"])
+        problem = self.map.problem()
+        if problem:
+            raise ConfigurationError(problem)
+        self.board = MarlinBoard(axes=self.map.axes, steps_per_unit=p["steps_per_unit"], buffer_size=p["buffer_size"])
+        self._lock = threading.Lock()
+        self._fd = self._slave = None
+        self._transcript = open(p["transcript"], "a", buffering=1) if p["transcript"] else None
+        self._plug()
+        self.pub_state = self.create_publisher(JointState, "finger/emulator/motor_state", 10)
+        self.pub_end = self.create_publisher(JointState, "finger/emulator/move_end", 100)
+        self._prev = (time.monotonic(), self.board.physical_steps())
+        self.create_timer(1.0 / p["publish_rate"], self._publish_state)
+        for name, fn in (("reset", self._reset), ("inject_error", self._inject), ("corrupt_next_line", self._corrupt),
+                         ("garbage", self._garbage), ("unplug", self._unplug), ("replug", self._replug)):
+            self.create_service(Trigger, f"~/{name}", fn)
+        self._running = True
+        self._thread = threading.Thread(target=self._serve, name="marlin_pty", daemon=True)
+        self._thread.start()
+        self.get_logger().info(f"emulated Marlin board on {p['port_link']} -> {self._device}")
+
+    # --- the pty ------------------------------------------------------------------------
+    def _plug(self) -> None:
+        fd, slave = os.openpty()
+        tty.setraw(fd)
+        tty.setraw(slave)
+        os.set_blocking(fd, False)   # a host that does not read must not stall the motion model
+        self._device = os.ttyname(slave)
+        link = self.p["port_link"]
+        tmp = f"{link}.tmp{os.getpid()}"
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
+        os.symlink(self._device, tmp)
+        os.replace(tmp, link)     # atomic: the link always points at a live device or is absent
+        self._fd, self._slave = fd, slave
+        self._buf = b""
+        with self._lock:
+            self.board.reset()    # a board that appears has just powered up: banner
+
+    def _close_pty(self) -> None:
+        link = self.p["port_link"]
+        if os.path.islink(link) and os.readlink(link) == self._device:
+            os.unlink(link)
+        for fd in (self._fd, self._slave):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._fd = self._slave = None
+
+    def _serve(self) -> None:
+        while self._running:
+            fd = self._fd
+            if fd is None:
+                time.sleep(0.01)
+                continue
+            try:
+                r, _, _ = select.select([fd], [], [], 0.002)
+                data = os.read(fd, 4096) if r else b""
+            except OSError:    # no one has the device open (EIO) or it was closed
+                data = b""
+                time.sleep(0.005)
+            now = time.monotonic()
+            with self._lock:
+                if data:
+                    self._buf += data
+                    while b"\n" in self._buf:
+                        raw, self._buf = self._buf.split(b"\n", 1)
+                        line = raw.decode("ascii", errors="replace").strip("\r")
+                        if self._transcript is not None:
+                            self._transcript.write(f"{now:.6f} {line}\n")
+                        self.board.receive(line, now)
+                self.board.tick(now)
+                out = self.board.take_output()
+                ends = self.board.take_completed()
+            if out and self._fd is not None:
+                try:
+                    os.write(self._fd, ("\n".join(out) + "\n").encode("ascii"))
+                except OSError:
+                    pass
+            for steps in ends:
+                self.pub_end.publish(self._state(steps, np.zeros(len(steps))))
+
+    # --- publishing ---------------------------------------------------------------------
+    def _state(self, steps, speed) -> JointState:
+        js = JointState()
+        js.header.stamp = self.get_clock().now().to_msg()
+        js.name = list(self.map.joints)
+        js.position = [float(v) for v in self.map.steps_to_pull(steps)]
+        js.velocity = [float(v) for v in speed]
+        return js
+
+    def _publish_state(self) -> None:
+        with self._lock:
+            self.board.tick(time.monotonic())
+            steps = self.board.physical_steps()
+        t, prev = self._prev
+        now = time.monotonic()
+        speed = self.map.steps_to_pull(steps - prev) / max(now - t, 1e-6)
+        self._prev = (now, steps)
+        self.pub_state.publish(self._state(steps, speed))
+
+    # --- faults -------------------------------------------------------------------------
+    def _reset(self, req, res):
+        with self._lock:
+            self.board.reset()
+        self.get_logger().warn("board reset (banner sent; counts and line numbers are 0, motors did not move)")
+        res.success, res.message = True, "reset"
+        return res
+
+    def _inject(self, req, res):
+        with self._lock:
+            self.board.inject_error()
+        res.success, res.message = True, "Error: line queued"
+        return res
+
+    def _corrupt(self, req, res):
+        with self._lock:
+            self.board.corrupt_next(1)
+        res.success, res.message = True, "the next numbered line fails its checksum"
+        return res
+
+    def _garbage(self, req, res):
+        if self._fd is not None:
+            os.write(self._fd, bytes(np.random.default_rng().integers(0, 256, 64, dtype=np.uint8)) + b"\n")
+        res.success, res.message = True, "64 random bytes sent"
+        return res
+
+    def _unplug(self, req, res):
+        self._close_pty()
+        self.get_logger().warn("unplugged: the device and its link are gone")
+        res.success, res.message = True, "unplugged"
+        return res
+
+    def _replug(self, req, res):
+        if self._fd is None:
+            self._plug()
+            self.get_logger().info(f"plugged in again as {self._device}")
+        res.success, res.message = True, f"device {self._device}"
+        return res
+
+    def destroy_node(self):
+        self._running = False
+        if getattr(self, "_thread", None) is not None:
+            self._thread.join(1.0)
+        self._close_pty()
+        if self._transcript is not None:
+            self._transcript.close()
+        return super().destroy_node()
+
+
+def main(args=None):
+    return run_node(MarlinEmulator, args)
+
+
+if __name__ == "__main__":
+    import sys
+    sys.exit(main())

@@ -1,0 +1,393 @@
+"""stepper_driver: tendon setpoints -> G-code for a Marlin board (Arduino Mega + RAMPS) over serial.
+
+Subscribes to ``finger/tendon_setpoints`` (JointState: cable pull from rest [m] per cable, by
+name), converts each pull to whole microsteps (``core.stepper``), and sends one ``G1`` per
+setpoint whose feedrate makes all axes arrive together, the fastest cable at
+``max_cable_speed``. The link follows Marlin's protocol (``core.marlin``): banner, ``M110``,
+``G21`` (mm), ``G90`` (absolute), ``G92`` (the known position), numbered and checksummed lines,
+``ok`` flow control with a window, ``Resend:`` handling. ``M114`` is polled and published as
+``finger/stepper_state`` (JointState: the pulls the motors' reported step counts mean [m]);
+``M400`` follows the last setpoint of a burst (trajectory end).
+
+Fail safe: a setpoint with wrong names, NaN or a pull outside [min_pull, max_pull] is refused
+whole and logged; nothing is queued while the link is down, so nothing stale is sent after a
+reconnect. ``~/stop`` (std_srvs/Trigger) drops queued moves, quick-stops the board (``M410``)
+and disables the motors (``M18``); setpoints are refused until ``~/resume``. Shutdown does the
+same. A board reset (``start`` mid-session) or a vanished device is logged; the driver
+reconnects, re-initialises and restores the last reported position with ``G92``.
+``diagnostics``: link state, queue depth, lines in flight, errors, resends, refusals.
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import serial
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from std_srvs.srv import Trigger
+
+from ..core.marlin import GcodeSender, format_axes, parse_reply
+from ..core.stepper import CableMotorMap
+
+PARAMS = [
+    Param("port", "/tmp/softkin_marlin", "serial device of the Marlin board (e.g. /dev/ttyACM0)"),
+    Param("baud", 115200, "serial baud rate", min=1200, max=4000000),
+    Param("joints", ["cable_0", "cable_1", "cable_2"], "cable (joint) names of the setpoints, one per axis"),
+    Param("axes", ["X", "Y", "Z"], "Marlin axis letter of each cable"),
+    Param("pulley_radius", 0.005, "radius the cables wind on [m]", min=1e-4, max=0.1),
+    Param("steps_per_rev", 200, "full steps per motor revolution (1.8 deg motors: 200)", min=1, max=10000),
+    Param("microsteps", 16, "driver microstepping (RAMPS A4988, all jumpers: 16)", min=1, max=256),
+    Param("steps_per_unit", 80.0, "the board's microsteps per axis unit (its M92 setting)", min=1e-3, max=5000.0),
+    Param("min_pull", 0.0, "soft limit: smallest cable pull [m] (below it the cable is pushed slack)",
+          min=-0.1, max=0.1),
+    Param("max_pull", 0.0085, "soft limit: largest cable pull [m] (built-in finger: 0.85 of its two 5 mm slots)",
+          min=0.0, max=0.5),
+    Param("max_cable_speed", 0.01, "speed of the fastest cable in a move [m/s]", min=1e-5, max=1.0, live=True),
+    Param("max_feedrate", 6000.0, "feedrate cap [axis units/min]", min=1.0, max=100000.0, live=True),
+    Param("window", 1, "lines in flight without an ok", min=1, max=8),
+    Param("poll_period", 0.25, "M114 polling period [s]; 0 = no polling", min=0.0, max=60.0),
+    Param("settle_time", 0.3, "send M400 once no setpoint came for this long [s]; 0 = never", min=0.0, max=60.0),
+    Param("banner_timeout", 3.0, "wait this long for the board's start banner after opening [s]", min=0.0,
+          max=60.0),
+    Param("reconnect_period", 1.0, "retry opening the port this often [s]", min=0.05, max=60.0),
+    Param("ok_timeout", 10.0, "an ok not seen this long after the motion it waits for is taken as lost [s]",
+          min=0.5, max=600.0),
+    Param("max_queue", 500, "most commands waiting to be written; setpoints beyond are refused", min=1, max=100000),
+]
+
+
+class StepperDriver(Node):
+    NODE_NAME = "stepper_driver"
+
+    def __init__(self):
+        super().__init__(self.NODE_NAME)
+        p = self.p = declare_parameters(self, PARAMS, on_change=self._on_change)
+        self.map = CableMotorMap(joints=list(p["joints"]), axes=list(p["axes"]), pulley_radius=p["pulley_radius"],
+                                 steps_per_rev=p["steps_per_rev"], microsteps=p["microsteps"],
+                                 steps_per_unit=p["steps_per_unit"], min_pull=p["min_pull"], max_pull=p["max_pull"],
+                                 max_cable_speed=p["max_cable_speed"], max_feedrate=p["max_feedrate"])
+        problem = self.map.problem()
+        if problem:
+            raise ConfigurationError(problem)
+        self._lock = threading.Lock()
+        self.sender = GcodeSender(window=p["window"])
+        self.state = "disconnected"       # disconnected | connecting | ready | stopped
+        self._ser = None
+        n = len(self.map.joints)
+        self.commanded = np.zeros(n, np.int64)   # steps of the last queued move (board's plan)
+        self.reported = None                     # steps the board last reported (M114 Count)
+        self._stopped = False
+        self._motion_until = 0.0
+        self._last_move = None                   # time of the last G1 queued, until its M400
+        self._last_ok = time.monotonic()
+        self._last_poll = 0.0
+        self._opened_at = 0.0
+        self._next_open = 0.0
+        self._banner = False
+        self.stats = dict(errors=0, unknown=0, garbage=0, refused=0, moves=0, resets=0, reconnects=0, lost_oks=0)
+        self.pub_state = self.create_publisher(JointState, "finger/stepper_state", 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.create_subscription(JointState, "finger/tendon_setpoints", self._on_setpoint,
+                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        self.create_service(Trigger, "~/stop", self._srv_stop)
+        self.create_service(Trigger, "~/resume", self._srv_resume)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self._running = True
+        self._thread = threading.Thread(target=self._serve, name="marlin_serial", daemon=True)
+        self._thread.start()
+        self.get_logger().info(f"driving {self.map.joints} on axes {self.map.axes} through {p['port']} "
+                               f"({self.map.steps_per_metre:.1f} microsteps per m of cable)")
+
+    def _on_change(self, changed: dict) -> None:
+        with self._lock:
+            self.map.max_cable_speed = self.p["max_cable_speed"]
+            self.map.max_feedrate = self.p["max_feedrate"]
+
+    # --- setpoints (executor thread) ----------------------------------------------------
+    def _refuse(self, why: str, level: str = "error") -> None:
+        self.stats["refused"] += 1
+        if level == "warn":    # rclpy wants one severity per call site
+            self.get_logger().warn(f"setpoint refused: {why}")
+        else:
+            self.get_logger().error(f"setpoint refused: {why}")
+
+    def _on_setpoint(self, msg: JointState) -> None:
+        joints = self.map.joints
+        if len(msg.name) != len(msg.position) or sorted(msg.name) != sorted(joints):
+            self._refuse(f"names {list(msg.name)} with {len(msg.position)} positions do not match the joints {joints}")
+            return
+        pulls = np.array([msg.position[list(msg.name).index(j)] for j in joints], float)
+        problem = self.map.limit_problem(pulls)
+        if problem:
+            self._refuse(problem)
+            return
+        with self._lock:
+            if self._stopped:
+                self._refuse("the driver is stopped (call ~/resume)", "warn")
+                return
+            if self.state != "ready":
+                self._refuse(f"link {self.state}: not sent (nothing is replayed later)", "warn")
+                return
+            if self.sender.queue_depth >= self.p["max_queue"]:
+                self._refuse(f"{self.sender.queue_depth} commands are waiting (max_queue)")
+                return
+            steps = self.map.pull_to_steps(pulls)
+            values, feed, duration = self.map.move(self.commanded, steps)
+            if not values:
+                return     # already there to the microstep
+            self.sender.enqueue(format_axes("G1", values) + f" F{feed:.2f}")
+            self.commanded = steps
+            now = time.monotonic()
+            self._motion_until = max(now, self._motion_until) + duration
+            self._last_move = now
+            self.stats["moves"] += 1
+
+    # --- services -----------------------------------------------------------------------
+    def _emergency_stop(self) -> bool:
+        """Drop queued moves, M410 + M18; True if they were written to the board."""
+        with self._lock:
+            dropped = self.sender.abort()
+            written = False
+            if self._ser is not None and self.state in ("ready", "stopped"):
+                try:
+                    self._ser.write((self.sender.send_unnumbered("M410") + "\n").encode("ascii"))
+                    written = True
+                except (serial.SerialException, OSError) as exc:
+                    self.get_logger().error(f"stop: writing M410 failed: {exc}")
+                self.sender.enqueue("M18")
+                self.sender.enqueue("M114")
+            self._last_move = None
+            self._motion_until = 0.0
+        self.get_logger().warn(f"STOP: {dropped} queued commands dropped, M410 (quickstop) and M18 (motors off) "
+                               + ("sent" if written else "not sent: no link"))
+        return written
+
+    def _srv_stop(self, req, res):
+        self._stopped = True
+        written = self._emergency_stop()
+        res.success = True
+        res.message = "stopped: moves dropped, M410 + M18 " + ("sent" if written else "not sent (no link)")
+        return res
+
+    def _srv_resume(self, req, res):
+        with self._lock:
+            self._stopped = False
+            if self.reported is not None:
+                self.commanded = self.reported.copy()   # M410 left the plan where the motors stopped
+        self.get_logger().info("resumed: setpoints are accepted again")
+        res.success, res.message = True, "resumed"
+        return res
+
+    # --- serial thread ------------------------------------------------------------------
+    def _serve(self) -> None:
+        buf = b""
+        while self._running:
+            if self._ser is None:
+                self._try_open()
+                buf = b""
+                continue
+            try:
+                data = self._ser.read(self._ser.in_waiting or 1)
+            except (serial.SerialException, OSError, TypeError) as exc:
+                self._link_lost(f"read failed: {exc}")
+                continue
+            if data:
+                buf += data
+                while b"\n" in buf:
+                    raw, buf = buf.split(b"\n", 1)
+                    self._handle(raw.decode("ascii", errors="replace").strip("\r\x00 "))
+            if len(buf) > 4096:      # no line end in 4 kB: noise
+                self.stats["garbage"] += 1
+                buf = b""
+            try:
+                self._housekeeping()
+                self._write_ready()
+            except (serial.SerialException, OSError) as exc:
+                self._link_lost(f"write failed: {exc}")
+
+    def _try_open(self) -> None:
+        now = time.monotonic()
+        if now < self._next_open:
+            time.sleep(min(0.05, self._next_open - now))
+            return
+        self._next_open = now + self.p["reconnect_period"]
+        try:
+            ser = serial.Serial(self.p["port"], self.p["baud"], timeout=0.01, write_timeout=1.0)
+        except (serial.SerialException, OSError) as exc:
+            if self.state != "disconnected" or not getattr(self, "_warned_open", False):
+                self.get_logger().warn(f"cannot open {self.p['port']}: {exc}; retrying every "
+                                       f"{self.p['reconnect_period']} s")
+                self._warned_open = True
+            return
+        with self._lock:
+            self._ser = ser
+            self.sender.reset()
+            self.state = "connecting"
+            self._banner = False
+            self._opened_at = time.monotonic()
+        self._warned_open = False
+        self.get_logger().info(f"opened {self.p['port']}: waiting for the board's banner")
+
+    def _link_lost(self, why: str) -> None:
+        with self._lock:
+            ser, self._ser = self._ser, None
+            self.state = "disconnected"
+            self.sender.reset()
+            self._last_move = None
+            self.stats["reconnects"] += 1
+        if ser is not None:
+            try:
+                ser.close()
+            except (serial.SerialException, OSError):
+                pass
+        self.get_logger().error(f"link to the board lost ({why}); reconnecting, queued moves dropped")
+
+    def _initialise(self) -> None:
+        """After the banner (or its timeout): units, absolute mode, the known position."""
+        pos = self.reported if self.reported is not None else self.commanded
+        self.commanded = pos.copy()
+        self.sender.enqueue("G21")
+        self.sender.enqueue("G90")
+        self.sender.enqueue(format_axes("G92", dict(zip(self.map.axes, self.map.steps_to_axis(pos)))))
+        self.sender.enqueue("M114")
+        self.state = "stopped" if self._stopped else "ready"
+        self._last_ok = time.monotonic()
+        self.get_logger().info(f"board ready (banner {'seen' if self._banner else 'not seen'}); position set to "
+                               f"{np.round(self.map.steps_to_pull(pos) * 1e3, 4).tolist()} mm of pull")
+
+    def _handle(self, line: str) -> None:
+        if not line:
+            return
+        r = parse_reply(line)
+        log = self.get_logger()
+        with self._lock:
+            if r.kind == "ok":
+                self.sender.on_ok()
+                self._last_ok = time.monotonic()
+            elif r.kind == "resend":
+                if not self.sender.on_resend(r.line):
+                    log.error(f"board asked to resend line {r.line}, which is no longer known: re-synchronising")
+                    self.sender.abort()
+                else:
+                    log.warn(f"board asked to resend from line {r.line}")
+            elif r.kind == "position":
+                try:
+                    self.reported = np.array([r.counts[a] for a in self.map.axes], np.int64)
+                except KeyError:
+                    log.warn(f"position report without all axes {self.map.axes}: {line!r}")
+                    return
+                js = JointState()
+                js.header.stamp = self.get_clock().now().to_msg()
+                js.name = list(self.map.joints)
+                js.position = [float(v) for v in self.map.steps_to_pull(self.reported)]
+                self.pub_state.publish(js)
+            elif r.kind == "start":
+                if self.state == "connecting":
+                    self._banner = True
+                else:
+                    self.stats["resets"] += 1
+                    log.warn("the board reset (start banner mid-session): queued moves dropped, re-initialising")
+                    self.sender.reset()
+                    self._last_move = None
+                    self._initialise()
+            elif r.kind == "error":
+                self.stats["errors"] += 1
+                log.warn(f"board: {line}")
+            elif r.kind == "echo":
+                if "Unknown command" in line:
+                    self.stats["unknown"] += 1
+                    log.warn(f"board: {line}")
+                else:
+                    log.debug(f"board: {line}")
+            elif r.kind == "busy":
+                log.debug(f"board: {line}")
+            else:
+                self.stats["garbage"] += 1
+                log.warn(f"unrecognised line from the board ignored: {line[:80]!r}", throttle_duration_sec=2.0)
+
+    def _housekeeping(self) -> None:
+        now = time.monotonic()
+        with self._lock:
+            if self.state == "connecting":
+                if self._banner or now - self._opened_at > self.p["banner_timeout"]:
+                    self._initialise()
+                return
+            s = self.sender
+            if s.in_flight and now > max(self._last_ok, self._motion_until) + self.p["ok_timeout"]:
+                self.stats["lost_oks"] += 1
+                self.get_logger().warn(f"no ok for {s.in_flight_commands()[0]!r} within {self.p['ok_timeout']} s: "
+                                       "taking it as lost")
+                s.on_ok()
+                self._last_ok = now
+            settle = self.p["settle_time"]
+            if settle > 0 and self._last_move is not None and now - self._last_move > settle:
+                s.enqueue("M400")     # the burst (trajectory) is over: wait for the motion
+                s.enqueue("M114")
+                self._last_move = None
+            poll = self.p["poll_period"]
+            if poll > 0 and now - self._last_poll > poll and "M114" not in s.pending and \
+                    "M114" not in s.in_flight_commands():
+                s.enqueue("M114")
+                self._last_poll = now
+
+    def _write_ready(self) -> None:
+        with self._lock:
+            if self._ser is None or self.state == "connecting":
+                return
+            lines = self.sender.sendable()
+            if lines:
+                self._ser.write(("\n".join(lines) + "\n").encode("ascii"))
+                for line in lines:
+                    self.get_logger().debug(f"sent {line}")
+
+    # --- diagnostics / shutdown ---------------------------------------------------------
+    def _publish_diagnostics(self) -> None:
+        level = {"ready": DiagnosticStatus.OK, "connecting": DiagnosticStatus.WARN,
+                 "disconnected": DiagnosticStatus.ERROR}.get(self.state, DiagnosticStatus.WARN)
+        state = "stopped" if self._stopped else self.state
+        with self._lock:
+            vals = dict(port=self.p["port"], link=state, queue_depth=self.sender.queue_depth,
+                        in_flight=len(self.sender.in_flight), resends=self.sender.resends, **self.stats)
+            if self.reported is not None:
+                vals["reported_pull_mm"] = str(np.round(self.map.steps_to_pull(self.reported) * 1e3, 4).tolist())
+        st = DiagnosticStatus(name=f"{self.get_name()}: Marlin link", hardware_id=self.p["port"], level=level,
+                              message=state, values=[KeyValue(key=k, value=str(v)) for k, v in vals.items()])
+        arr = DiagnosticArray(status=[st])
+        arr.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(arr)
+
+    def close(self) -> None:
+        """Shutdown: quick-stop and disable the motors if the link is up, then close the port."""
+        if self._ser is not None and self.state in ("ready", "stopped"):
+            with self._lock:
+                self.sender.abort()
+                try:
+                    self._ser.write((self.sender.send_unnumbered("M410") + "\n").encode("ascii"))
+                except (serial.SerialException, OSError):
+                    pass
+                self.sender.enqueue("M18")
+            end = time.monotonic() + 1.0
+            while time.monotonic() < end and (self.sender.queue_depth or self.sender.in_flight):
+                time.sleep(0.02)
+            self.get_logger().info("shutdown: M410 + M18 sent")
+        self._running = False
+        self._thread.join(1.0)
+        if self._ser is not None:
+            try:
+                self._ser.close()
+            except (serial.SerialException, OSError):
+                pass
+
+
+def main(args=None):
+    return run_node(StepperDriver, args, close=lambda node: node.close())
+
+
+if __name__ == "__main__":
+    import sys
+    sys.exit(main())
