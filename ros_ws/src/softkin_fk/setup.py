@@ -22,6 +22,7 @@ setup(
             'kinematics_node = softkin_fk.nodes.kinematics_node:main',
             'stepper_driver = softkin_fk.nodes.stepper_driver:main',
             'marlin_emulator = softkin_fk.nodes.marlin_emulator:main',
+            'softkin-twin = softkin_fk.twin:main',
         ],
     },
 )

@@ -129,6 +129,9 @@ class RobotKinematics:
                              if config_samples >= 2 else None)
         self.faces = mesh.boundary_faces()
         self.last: Optional[IKResult] = None   #: last commanded solution (targets, trajectories)
+        #: a previous solution whose tip is this close to a new target seeds it (else the nearer
+        #: of it and the nearest configuration sample) [m]
+        self.warm_radius = 3e-3
 
     # --- checks -------------------------------------------------------------------------
     @property
@@ -185,10 +188,14 @@ class RobotKinematics:
         return self.solver.solve(a, x0=x0, active0=active0, tol=self.settings.fk_tol)
 
     def _start(self, target: np.ndarray, warm: Optional[IKResult]):
-        """Seed for IK: the previous solution or the nearest configuration sample, whichever is closer."""
+        """Seed for IK: the previous solution if within ``warm_radius``, else it or the nearest
+        configuration sample, whichever is closer."""
         cands = []
         if warm is not None:
-            cands.append((float(np.linalg.norm(warm.reached[0] - target)), warm.actuation, warm.fk))
+            d = float(np.linalg.norm(warm.reached[0] - target))
+            if d <= self.warm_radius:    # continuity: a near previous solution wins over a sample
+                return warm.actuation, warm.fk
+            cands.append((d, warm.actuation, warm.fk))
         if self.config_space is not None:
             k = self.config_space.nearest(target)
             cands.append((float(np.linalg.norm(self.config_space.points[k] - target)),
@@ -228,6 +235,12 @@ class RobotKinematics:
             c = self.check_actuation(initial)
             return solve_ik(self.solver, p, initial=c, initial_fk=self.forward(c), **kw)
         c, fk = self._start(p, warm)
+        if c is not None:
+            guess = self._predict(p, fk, lam)
+            if guess is not None and guess.success:
+                return guess
+            if guess is not None and guess.error < np.linalg.norm(fk.marker(self.mesh, self.marker) - p):
+                c, fk = guess.actuation, guess.fk
         r = solve_ik(self.solver, p, initial=c, initial_fk=fk, **kw)
         if not r.success and self.config_space is not None:
             k = self.config_space.nearest(p)
@@ -235,6 +248,31 @@ class RobotKinematics:
                              initial_fk=self.config_space.results[k], **kw)
             r = retry if retry.error < r.error else r
         return r
+
+    def _predict(self, target: np.ndarray, b: FKResult, lam: float) -> Optional[IKResult]:
+        """One Gauss-Newton step from a solved shape ``b`` with its exact (implicit) Jacobian.
+
+        For a target near the previous one (a streamed target, a service walk) the step lands
+        within lambda, so a single FK solve (warm started along the sensitivity) replaces the
+        line search's trials; its result is an exact FK solve like any IK iterate. None when
+        the implicit Jacobian does not apply.
+        """
+        if self.settings.jacobian != 'implicit' or not self.solver.newton_applicable():
+            return None
+        dx = self.solver.sensitivity(b)
+        m = self.mesh.markers[self.marker]
+        K = dx[m]                                        # (3, n_a): d tip / d actuation
+        r = b.positions[m] - target
+        KtK = K.T @ K
+        mu = 1e-3 * np.trace(KtK) / len(self.names) + 1e-12   # as solve_ik's Levenberg-Marquardt damping
+        c = np.clip(b.actuation - np.linalg.solve(KtK + mu * np.eye(len(self.names)), K.T @ r), self.lower, self.upper)
+        x0 = b.positions + dx @ (c - b.actuation)
+        fk = self.solver.solve(c, x0=x0, active0=b.active, tol=self.settings.fk_tol)
+        reached = fk.positions[m][None].copy()
+        err = float(np.linalg.norm(reached[0] - target))
+        return IKResult(actuation=c, reached=reached, target=target[None].copy(), error=err, iterations=1,
+                        fk_solves=1, success=err <= lam, out_of_reach=err > lam, fk=fk,
+                        history=np.array([float(np.linalg.norm(r)), err]))
 
     def waypoints(self, curve: str = '', n: int = 0, points=None) -> np.ndarray:
         """Waypoints (N, 3) of a built-in curve (``n`` samples, 0 = default) or checked points."""

@@ -56,7 +56,9 @@ PARAMS = [
           "[m]; 0 = the box diagonal", min=0.0, max=100.0),
     Param("hold_rest_cables", False, "a cable at rest length that bending would stretch goes taut (its motor "
           "holds it); off: the core's model, in which the built-in curves were placed"),
-    Param("publish_shape", True, "publish the deformed surface on finger/shape with every command"),
+    Param("publish_shape", True, "publish the deformed surface on finger/shape with commands"),
+    Param("shape_period", 0.2, "least time between two finger/shape messages while streaming [s] (a trajectory's "
+          "last shape is always sent)", min=0.0, max=10.0, live=True),
 ]
 
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -95,6 +97,7 @@ class KinematicsNode(Node):
         self._trajectory = False       # an action goal is running
         self._command_seq = 0          # bumped when a trajectory starts: older pending targets are stale
         self._last_query = None        # last SolveIk solution (service warm start)
+        self._last_shape = 0.0
         self.pub_setpoints = self.create_publisher(JointState, "finger/tendon_setpoints", RELIABLE)
         self.pub_tip = self.create_publisher(PointStamped, "finger/tip", 10)
         self.pub_shape = self.create_publisher(Marker, "finger/shape", LATCHED)
@@ -131,7 +134,7 @@ class KinematicsNode(Node):
         s.i_max = self.p["max_iterations"]
 
     # --- publishing -----------------------------------------------------------------------
-    def _publish_command(self, ik, stamp=None) -> None:
+    def _publish_command(self, ik, stamp=None, final: bool = True) -> None:
         """Setpoints, tip and shape of a commanded IK solution (worker thread)."""
         stamp = stamp or self.get_clock().now().to_msg()
         if self.kin.all_cables:
@@ -144,10 +147,11 @@ class KinematicsNode(Node):
         tip.header.stamp, tip.header.frame_id = stamp, self.frame
         tip.point = _point(ik.reached[0])
         self.pub_tip.publish(tip)
-        if self.p["publish_shape"]:
+        if self.p["publish_shape"] and (final or time.monotonic() - self._last_shape >= self.p["shape_period"]):
             self._publish_shape(ik.fk.positions, stamp)
 
     def _publish_shape(self, positions, stamp=None) -> None:
+        self._last_shape = time.monotonic()
         m = Marker()
         m.header.stamp = stamp or self.get_clock().now().to_msg()
         m.header.frame_id = self.frame
@@ -155,7 +159,7 @@ class KinematicsNode(Node):
         m.pose.orientation.w = 1.0
         m.scale.x = m.scale.y = m.scale.z = 1.0
         m.color.r, m.color.g, m.color.b, m.color.a = 0.95, 0.55, 0.15, 1.0
-        m.points = [_point(q) for q in positions[self.kin.faces].reshape(-1, 3)]
+        m.points = [Point(x=x, y=y, z=z) for x, y, z in positions[self.kin.faces].reshape(-1, 3).tolist()]
         self.pub_shape.publish(m)
 
     # --- streamed targets -----------------------------------------------------------------
@@ -293,7 +297,7 @@ class KinematicsNode(Node):
                                       within_tolerance=bool(r.error <= lam))
             if not g.dry_run:
                 self.kin.last = r
-                self._publish_command(r)
+                self._publish_command(r, final=i == len(P) - 1)
             goal_handle.publish_feedback(fb)
             self.worker.serve_pending()   # services answered between waypoints
             return not goal_handle.is_cancel_requested
