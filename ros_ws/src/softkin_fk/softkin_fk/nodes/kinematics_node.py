@@ -98,6 +98,7 @@ class KinematicsNode(Node):
         self._command_seq = 0          # bumped when a trajectory starts: older pending targets are stale
         self._last_query = None        # last SolveIk solution (service warm start)
         self._last_shape = 0.0
+        self._closing = False
         self.pub_setpoints = self.create_publisher(JointState, "finger/tendon_setpoints", RELIABLE)
         self.pub_tip = self.create_publisher(PointStamped, "finger/tip", 10)
         self.pub_shape = self.create_publisher(Marker, "finger/shape", LATCHED)
@@ -300,7 +301,7 @@ class KinematicsNode(Node):
                 self._publish_command(r, final=i == len(P) - 1)
             goal_handle.publish_feedback(fb)
             self.worker.serve_pending()   # services answered between waypoints
-            return not goal_handle.is_cancel_requested
+            return not (goal_handle.is_cancel_requested or self._closing)
 
         t0 = time.perf_counter()
         try:
@@ -317,6 +318,12 @@ class KinematicsNode(Node):
         result.actuations = [float(v) for v in np.asarray(tr.actuations).ravel()]
         result.waypoints_reached = int(np.sum(tr.errors <= lam))
         done = len(tr.targets)
+        if self._closing and done < len(P):
+            result.success = False
+            result.message = f"node shutting down: stopped after {done} of {len(P)} waypoints"
+            log.warn(f"follow_curve {result.message}")
+            goal_handle.abort()
+            return result
         if goal_handle.is_cancel_requested:
             result.success = False
             result.message = f"canceled after {done} of {len(P)} waypoints"
@@ -331,6 +338,7 @@ class KinematicsNode(Node):
         return result
 
     def destroy_node(self):
+        self._closing = True   # a running trajectory stops at its next waypoint
         self.worker.stop()
         self._action.destroy()
         return super().destroy_node()
