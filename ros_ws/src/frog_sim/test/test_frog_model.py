@@ -41,8 +41,8 @@ def test_frog_model_geometry_matches_paper():
     assert all(len(r[3]) > 5 for r in rows)                       # every parameter has a source
 
 
-def test_actuation_fit_reproduces_measured_profiles(library):
-    data = read_curvature_profiles()
+def test_actuation_fit_reproduces_measured_profiles(library, measured_file):
+    data = read_curvature_profiles(measured_file("limb_curvature_profiles.csv"))
     assert len(library.profiles) == len(data) == 48
     for key, (t, kappa) in data.items():
         prof = library.profiles[key]
