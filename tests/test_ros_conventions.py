@@ -192,3 +192,26 @@ def test_sim_real_time_factor_is_live(launch, probe):
     r = probe.call(setp, SetParameters.Request(parameters=[_double("real_time_factor", -1.0)])).results[0]
     assert not r.successful and "real_time_factor" in r.reason
     assert sim.stop() == 0
+
+
+def test_every_numeric_parameter_has_a_range(launch, probe, library):
+    """ros2 param describe shows a range for every numeric parameter of the frog nodes."""
+    nodes = [launch("sim_node"), launch("planner_node", params={"library_file": str(library)}),
+             launch("recorder", params={"output_dir": str(library.parent / "rec")})]
+    from rcl_interfaces.srv import ListParameters
+    for name in ("sim_node", "planner_node", "recorder"):
+        lister = probe.node.create_client(ListParameters, f"/{name}/list_parameters")
+        describe = probe.node.create_client(DescribeParameters, f"/{name}/describe_parameters")
+        probe.wait_for_service(lister, timeout=120)
+        probe.wait_for_service(describe)
+        names = list(probe.call(lister, ListParameters.Request()).result.names)
+        assert len(names) > 5
+        unbounded = []
+        for d in probe.call(describe, DescribeParameters.Request(names=names)).descriptors:
+            numeric = d.type in (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_INTEGER)
+            if numeric and not (d.floating_point_range or d.integer_range):
+                unbounded.append(d.name)
+            assert d.description or d.name in ("use_sim_time", "start_type_description_service"), d.name
+        assert not unbounded, f"{name}: numeric parameters without a range: {unbounded}"
+    for n in nodes:
+        assert n.stop() == 0

@@ -68,9 +68,10 @@ def _model_params(defaults: FrogParameters) -> list:
     for f in _MODEL_FIELDS:
         lo, hi = f.metadata.get("range", (None, None))
         unit = f.metadata.get("unit", "")
+        choices = f.metadata.get("choices")
         rows.append(Param(f.name, getattr(defaults, f.name),
-                          f"FrogParameters.{f.name}{' [' + unit + ']' if unit else ''} (see "
-                          f"frog_sim/core/model_parameters.py)", lo, hi))
+                          f"FrogParameters.{f.name}{' [' + unit + ']' if unit not in ('', '-') else ''} (see "
+                          f"frog_sim/core/model_parameters.py)", lo, hi, tuple(choices) if choices else None))
     return rows
 
 
