@@ -19,6 +19,7 @@ setup(
     entry_points={
         'console_scripts': [
             'frog-planner-eval = frog_twin.eval_cli:main',
+            'image_preview = frog_twin.nodes.image_preview:main',
         ],
     },
 )

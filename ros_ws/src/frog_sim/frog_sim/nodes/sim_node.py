@@ -41,6 +41,8 @@ _NODE_PARAMS = [
     Param("time_step", DEFAULT_TIME_STEP, "integrator time step dt [s]", min=1e-5, max=0.01),
     Param("odom_rate_hz", 50.0, "rate of frog/sim/odom in simulated time [Hz]", min=0.1, max=1000.0),
     Param("shape_rate_hz", 10.0, "rate of frog/sim/shape in simulated time [Hz]", min=0.1, max=200.0),
+    Param("execute_primitives", True, "execute frog/primitive directly; false when a robot (emulator) fires the "
+          "limbs through frog/limb_activation, as in the digital twin"),
     Param("odom_alias_topic", "", "also publish the ground truth here (e.g. frog/odom for a vision-free "
           "loop); empty = off"),
     Param("world_frame", "tank", "frame of poses (REP-105 world/odom frame)"),
@@ -122,7 +124,8 @@ class SimNode(Node):
                 self._TFMessage = TFMessage
                 self.tf_pub = self.create_publisher(TFMessage, "tf", 100)
         from soft_robot_interfaces.msg import LimbActivation, Primitive
-        self.create_subscription(Primitive, "frog/primitive", self.on_primitive, qos)
+        if p["execute_primitives"]:
+            self.create_subscription(Primitive, "frog/primitive", self.on_primitive, qos)
         self.create_subscription(LimbActivation, "frog/limb_activation", self.on_activation, qos)
         self.create_service(Trigger, "~/reset", self.on_reset)
 
