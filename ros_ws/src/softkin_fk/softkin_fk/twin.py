@@ -26,69 +26,17 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
-import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from soft_robot_common.processes import NodeProcess, acquire_domain, ros_args
 
 MM = 1e-3
 TOPICS = ["/finger/tendon_setpoints", "/finger/tip", "/finger/shape", "/finger/stepper_state",
           "/finger/emulator/motor_state", "/finger/emulator/move_end", "/diagnostics",
           "/finger/follow_curve/_action/status"]   # the recorder cannot decode action feedback types yet
-
-
-class Process:
-    """A node process in its own session; stopped by SIGINT, then SIGTERM, then SIGKILL."""
-
-    def __init__(self, argv, env, log_path: Path, name: str):
-        self.name, self.log_path = name, log_path
-        self._log = open(log_path, "wb")
-        self.proc = subprocess.Popen(argv, env=env, stdout=self._log, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, start_new_session=True)
-
-    def running(self) -> bool:
-        return self.proc.poll() is None
-
-    def log_text(self) -> str:
-        self._log.flush()
-        return self.log_path.read_text(errors="replace")
-
-    def wait_for_log(self, text: str, timeout: float) -> None:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if text in self.log_text():
-                return
-            if not self.running():
-                raise RuntimeError(f"{self.name} exited (code {self.proc.returncode}):\n{self.log_text()[-2000:]}")
-            time.sleep(0.1)
-        raise RuntimeError(f"{self.name} did not log {text!r} within {timeout} s:\n{self.log_text()[-2000:]}")
-
-    def stop(self) -> int:
-        for sig, timeout in ((signal.SIGINT, 10.0), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
-            if not self.running():
-                break
-            try:
-                os.killpg(self.proc.pid, sig)
-                self.proc.wait(timeout)
-            except (ProcessLookupError, subprocess.TimeoutExpired):
-                continue
-        self._log.close()
-        return self.proc.returncode
-
-
-def _ros_args(params: dict) -> list:
-    out = ["--ros-args"]
-    for k, v in params.items():
-        if isinstance(v, bool):
-            v = "true" if v else "false"
-        elif isinstance(v, (list, tuple)):
-            v = "[" + ",".join(f"'{x}'" for x in v) + "]"
-        out += ["-p", f"{k}:={v}"]
-    return out
 
 
 def _stamp(msg) -> float:
@@ -316,7 +264,8 @@ def build_parser():
     p.add_argument("--no-hold-rest-cables", dest="hold_rest_cables", action="store_false",
                    help="the core's model: such a cable stays slack (the curves were placed in it)")
     p.add_argument("--port", default=None, help="a real Marlin board's serial port instead of the emulator")
-    p.add_argument("--domain", type=int, default=None, help="ROS domain id (default: a random one in 150-229)")
+    p.add_argument("--domain", type=int, default=None,
+                   help="ROS domain id (default: one no other run on this machine holds)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
 
@@ -336,31 +285,36 @@ def main(argv=None) -> int:
         print(f"softkin-twin: error: {out} already holds a recording; choose another --out", file=sys.stderr)
         return 2
     (out / "recording").mkdir(parents=True, exist_ok=True)
-    env = dict(os.environ)
-    env.update(ROS_DOMAIN_ID=str(args.domain if args.domain is not None else random.randint(150, 229)),
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
-    env.pop("ROS_LOCALHOST_ONLY", None)
+    if args.domain is not None:
+        domain = None
+        env = dict(os.environ, ROS_DOMAIN_ID=str(args.domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                   PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
+        env.pop("ROS_LOCALHOST_ONLY", None)
+    else:
+        domain = acquire_domain()     # held exclusively until the end of the run
+        env = domain.env
     os.environ.update(ROS_DOMAIN_ID=env["ROS_DOMAIN_ID"], ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     port = args.port or str((out / "marlin_pty").resolve())
     procs = []
 
     def start(name, argv):
-        pr = Process(argv, env, out / f"{name}.log", name)
+        pr = NodeProcess(argv, env, out / f"{name}.log", name)
         procs.append(pr)
         return pr
 
     t_start = time.monotonic()
     try:
-        rec = start("recorder", ["recorder", *_ros_args(dict(output_dir=str(out / "recording"), file_prefix="twin",
-                                                             topics=TOPICS, include_hidden=True))])
+        rec = start("recorder", ["recorder", *ros_args(dict(output_dir=str(out / "recording"), file_prefix="twin",
+                                                            topics=TOPICS, include_hidden=True))])
         rec.wait_for_log("recording", 60)
         if not args.port:
-            start("marlin_emulator", ["marlin_emulator", *_ros_args(dict(port_link=port))]).wait_for_log(
+            start("marlin_emulator", ["marlin_emulator", *ros_args(dict(port_link=port))]).wait_for_log(
                 "emulated Marlin board", 60)
-        start("stepper_driver", ["stepper_driver", *_ros_args(dict(port=port, max_cable_speed=args.cable_speed,
-                                                                   banner_timeout=1.0))]).wait_for_log(
-            "board ready", 60)
-        kin = start("kinematics_node", ["kinematics_node", *_ros_args(dict(
+        # a real Arduino resets when the port opens and prints its banner ~2 s later
+        start("stepper_driver", ["stepper_driver", *ros_args(dict(port=port, max_cable_speed=args.cable_speed,
+                                                                  banner_timeout=3.0 if args.port else 1.0))]
+              ).wait_for_log("board ready", 60)
+        kin = start("kinematics_node", ["kinematics_node", *ros_args(dict(
             resolution=args.resolution, config_samples=args.config_samples, tolerance=args.lam_mm * MM,
             hold_rest_cables=args.hold_rest_cables))])
         kin.wait_for_log("ready in", 300)
@@ -370,6 +324,8 @@ def main(argv=None) -> int:
         codes = {}
         for pr in reversed(procs):
             codes[pr.name] = pr.stop()
+        if domain is not None:
+            domain.release()
     bad_exit = {k: v for k, v in codes.items() if v != 0}
     if bad_exit:
         print(f"warning: processes did not exit cleanly: {bad_exit} (logs in {out})", file=sys.stderr)
