@@ -100,9 +100,12 @@ def test_board_motion_takes_the_feedrate_time_and_m400_waits():
     b.receive("G1 X13 Y4 F300", 2.0)
     b.tick(2.5)
     assert b.counts.tolist() == [920, 160, 0]
+    assert b.velocity().tolist() == pytest.approx([240.0, 320.0, 0.0])   # steps/s: (3, 4) units/s x 80
     b.tick(3.0)
     assert b.counts.tolist() == [1040, 320, 0]
-    assert [p.tolist() for p in b.take_completed()] == [[800, 0, 0], [1040, 320, 0]]
+    done = b.take_completed()
+    assert [p.tolist() for _, p in done] == [[800, 0, 0], [1040, 320, 0]]
+    assert [t for t, _ in done] == pytest.approx([1.0, 3.0])     # the model's own end times
 
 
 def test_board_reset_quickstop_and_g92_keep_the_physical_position():

@@ -122,8 +122,15 @@ class MarlinBoard:
         out, self._out = self._out, []
         return out
 
-    def take_completed(self) -> List[np.ndarray]:
-        """Physical step positions at the end of each move finished since the last call."""
+    def velocity(self) -> np.ndarray:
+        """Motor speeds (microsteps/s) of the move in progress; zeros at rest."""
+        if not self.moves or self.moves[0].t0 is None or self.moves[0].duration <= 0:
+            return np.zeros(len(self.axes))
+        m = self.moves[0]
+        return (m.end - m.start) / m.duration
+
+    def take_completed(self) -> List[tuple]:
+        """``(end time, physical step positions)`` of each move finished since the last call."""
         out, self._completed = self._completed, []
         return out
 
@@ -158,7 +165,7 @@ class MarlinBoard:
                 self.counts = m.end.copy()
                 self.moves.popleft()
                 self.moves_done += 1
-                self._completed.append(self.physical_steps())
+                self._completed.append((m.t0 + m.duration, self.physical_steps()))
                 if self.moves:   # back to back, no gap (or from when it was queued)
                     nxt = self.moves[0]
                     nxt.t0 = max(m.t0 + m.duration, nxt.queued)

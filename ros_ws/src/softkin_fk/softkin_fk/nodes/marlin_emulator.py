@@ -21,6 +21,7 @@ import time
 import tty
 
 import numpy as np
+from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
@@ -62,7 +63,6 @@ class MarlinEmulator(Node):
         self._plug()
         self.pub_state = self.create_publisher(JointState, "finger/emulator/motor_state", 10)
         self.pub_end = self.create_publisher(JointState, "finger/emulator/move_end", 100)
-        self._prev = (time.monotonic(), self.board.physical_steps())
         self.create_timer(1.0 / p["publish_rate"], self._publish_state)
         for name, fn in (("reset", self._reset), ("inject_error", self._inject), ("corrupt_next_line", self._corrupt),
                          ("garbage", self._garbage), ("unplug", self._unplug), ("replug", self._replug)):
@@ -132,13 +132,13 @@ class MarlinEmulator(Node):
                     os.write(self._fd, ("\n".join(out) + "\n").encode("ascii"))
                 except OSError:
                     pass
-            for steps in ends:
-                self.pub_end.publish(self._state(steps, np.zeros(len(steps))))
+            for t_end, steps in ends:   # stamped when the model's move ended, however late the thread woke
+                self.pub_end.publish(self._state(steps, np.zeros(len(steps)), age=time.monotonic() - t_end))
 
     # --- publishing ---------------------------------------------------------------------
-    def _state(self, steps, speed) -> JointState:
+    def _state(self, steps, speed, age: float = 0.0) -> JointState:
         js = JointState()
-        js.header.stamp = self.get_clock().now().to_msg()
+        js.header.stamp = (self.get_clock().now() - Duration(seconds=max(age, 0.0))).to_msg()
         js.name = list(self.map.joints)
         js.position = [float(v) for v in self.map.steps_to_pull(steps)]
         js.velocity = [float(v) for v in speed]
@@ -148,10 +148,7 @@ class MarlinEmulator(Node):
         with self._lock:
             self.board.tick(time.monotonic())
             steps = self.board.physical_steps()
-        t, prev = self._prev
-        now = time.monotonic()
-        speed = self.map.steps_to_pull(steps - prev) / max(now - t, 1e-6)
-        self._prev = (now, steps)
+            speed = self.map.steps_to_pull(self.board.velocity())
         self.pub_state.publish(self._state(steps, speed))
 
     # --- faults -------------------------------------------------------------------------
