@@ -111,10 +111,12 @@ def main() -> int:
             errs.append(r.residual_error)
             assert r.success, r.message
         c1, p1 = proc_cpu(pid), time.process_time()
+        q0 = time.process_time()
         for t in targets[1:]:
             t0 = time.perf_counter()
             warm = core.inverse(t, warm=warm)
             core_times.append(time.perf_counter() - t0)
+        core_cpu = (time.process_time() - q0) / len(core_times)
         # the core's Algorithm 2 alone (line search from the warm start, no predictor step)
         from softkin_fk.core.inverse import solve_ik
         s = core.settings
@@ -127,8 +129,8 @@ def main() -> int:
         n = len(times)
         rows.append(row("ik_1mm", statistics.median(times), statistics.median(core_times), (c1 - c0) / n,
                         (p1 - p0) / n, f"({n} calls, max {max(times) * 1e3:.0f} ms, largest error "
-                                       f"{max(errs) * 1e3:.3f} mm; core solve_ik line search alone "
-                                       f"{statistics.median(plain) * 1e3:.1f} ms)"))
+                                       f"{max(errs) * 1e3:.3f} mm; core cpu {core_cpu * 1e3:.1f} ms; core solve_ik "
+                                       f"line search alone {statistics.median(plain) * 1e3:.1f} ms)"))
 
         # --- FK ------------------------------------------------------------------------
         acts = [np.array([0.95, 0.96, 0.97]) - 0.002 * k for k in range(10)]
