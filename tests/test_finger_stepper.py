@@ -285,3 +285,16 @@ def test_board_reset_and_replug_recover_without_replaying(launch, probe, tmp_pat
     assert np.allclose(ends[-1].position, np.rint(np.array([0.003, 0.001, 0.0]) * STEPS_PER_M) / STEPS_PER_M,
                        atol=1e-12)
     assert emu.running() and drv.running()
+
+
+def test_bad_configuration_exits_2_with_the_reason(launch, tmp_path):
+    # (not "Y": YAML 1.1 reads an unquoted Y on the command line as a boolean)
+    cases = [("stepper_driver", dict(axes=["X", "Z"]), "same, non-zero length"),
+             ("stepper_driver", dict(min_pull=0.01, max_pull=0.005), "min_pull"),
+             ("marlin_emulator", dict(axes=["X", "X", "Z"], port_link=str(tmp_path / "m")), "distinct"),
+             ("kinematics_node", dict(mesh_file=str(tmp_path / "missing.msh")), "needs both mesh_file and spec_file"),
+             ("kinematics_node", dict(marker="knuckle"), "no marker 'knuckle'")]
+    for exe, params, why in cases:
+        p = launch(exe, params=params)
+        assert p.wait(60) == 2, p.log_text()
+        assert why in p.log_text(), p.log_text()
