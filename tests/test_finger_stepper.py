@@ -170,6 +170,20 @@ def test_exact_gcode_resend_soft_limits_and_stop(launch, probe, serial_pair):
     assert drv.stop() == 0 and drv.stopped_cleanly
 
 
+def test_a_lost_ok_is_given_up_after_ok_timeout(launch, probe, serial_pair):
+    fd, path = serial_pair
+    drv, pub = _start(launch, probe, path, ok_timeout=0.5)
+    board = Board(fd)
+    _handshake(board)
+    p1, p2 = [0.001, 0.0, 0.0], [0.002, 0.0, 0.0]
+    pub.publish(_js(JOINTS, p1))
+    board.expect(line(5, g1([0, 0, 0], p1)), ok=False)     # the ok is lost on the wire
+    pub.publish(_js(JOINTS, p2))
+    drv.wait_for_log("within 0.5 s: taking it as lost", timeout=10)
+    board.expect(line(6, g1(p1, p2)))
+    assert drv.stop() == 0 and drv.stopped_cleanly
+
+
 def test_board_vanishing_is_logged_and_nothing_is_replayed(launch, probe, serial_pair, tmp_path):
     fd, path = serial_pair
     drv, pub = _start(launch, probe, path, reconnect_period=0.2)

@@ -148,3 +148,18 @@ def test_cable_motor_map_conversion_limits_and_synchronised_feedrate():
     assert values == {"X": b[0] / 80.0, "Y": b[1] / 80.0, "Z": b[2] / 80.0}
     assert m.move(b, b) == ({}, 0.0, 0.0)
     assert "same, non-zero length" in CableMotorMap(axes=["X", "Y"]).problem()
+
+
+def test_sender_window_keeps_taken_lines_in_flight_on_resend():
+    s = GcodeSender(window=3)
+    for c in ("G21", "G90", "M114", "M400"):
+        s.enqueue(c)
+    assert s.sendable() == [frame_line(0, "M110 N0"), frame_line(1, "G21"), frame_line(2, "G90")]
+    assert s.on_ok() == "M110 N0"
+    assert s.sendable() == [frame_line(3, "M114")]
+    # line 2 was garbled; 1 was taken (its ok is still to come), 2 and 3 go again
+    assert s.on_resend(2) and list(s.in_flight) == [1]
+    assert s.sendable() == [frame_line(2, "G90"), frame_line(3, "M114")]
+    assert [s.on_ok() for _ in range(3)] == ["G21", "G90", "M114"]
+    assert s.sendable() == [frame_line(4, "M400")]
+    assert not s.on_resend(99)      # a line never sent cannot be resent
