@@ -26,8 +26,9 @@ def test_far_field_strains_of_a_long_bar_follow_the_closed_form(r_m):
     assert nu_b == pytest.approx((1 - rw_b) / (2 + rw_b), rel=0.07)
 
 
+@pytest.mark.slow   # ~20 s: the package's calibration starts each bisection at R_w^B = 1e-3
 def test_clamped_bar_calibration_lies_just_above_the_uniaxial_law():
-    rows = calibration_table((3.75, 5.68))
+    rows = calibration_table((3.75, 5.68), rel_tol=1e-2)    # 1 %: enough for the bounds below
     ideal = uniaxial_shape_parameter_ratio([3.75, 5.68])
     got = np.array([r['ratio'] for r in rows])
     assert np.all(got > ideal) and np.all(got < 1.12 * ideal)    # end clamps: +6 % and +9 %
