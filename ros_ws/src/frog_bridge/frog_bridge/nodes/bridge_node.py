@@ -183,7 +183,8 @@ class BridgeNode(Node):
 
     def _decided(self, decision, t_in: float) -> None:
         if not decision.accepted:
-            self.get_logger().warn(decision.reason if " refused: " in decision.reason else f"refused: {decision.reason}")
+            reason = decision.reason
+            self.get_logger().warn(reason if " refused: " in reason else f"refused: {reason}")
             return
         for c in decision.cancelled:
             self.get_logger().info(f"cancelled pending {c.label} pulse: a newer command heats the same limb")
@@ -234,8 +235,9 @@ class BridgeNode(Node):
                 self.lost_at = ev.at
                 n = len(self.scheduler.cancel_all(CANCELLED_LINK))
                 self._arm_due_timer()
-                self.get_logger().error(f"serial link lost ({ev.text}); {n} pending pulse(s) cancelled, retrying "
-                                        f"every {self.cfg['reconnect_period_s']:g}-{self.cfg['reconnect_max_period_s']:g} s")
+                lo, hi = self.cfg["reconnect_period_s"], self.cfg["reconnect_max_period_s"]
+                self.get_logger().error(f"serial link lost ({ev.text}); {n} pending pulse(s) cancelled, "
+                                        f"retrying every {lo:g}-{hi:g} s")
                 self.publish_diagnostics()
             elif ev.kind == "open_failed":
                 self.get_logger().warn(f"cannot open {self.cfg['port']}: {ev.text}; retrying",
