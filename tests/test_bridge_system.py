@@ -312,3 +312,34 @@ def test_bad_configuration_exits_2(launch, tmp_path):
     (tmp_path / "plain").write_text("x")
     e = launch("robot_emulator", params={"link_path": str(tmp_path / "plain")})
     assert e.wait(60) == 2 and "not a symbolic link" in e.log_text()
+
+
+def test_end_to_end_primitive_moves_the_simulated_frog(launch, probe, tmp_path):
+    """primitive -> bridge_node -> pty -> robot_emulator -> frog/limb_activation -> sim_node."""
+    from soft_robot_interfaces.msg import LimbActivation, Primitive
+    # sim_node must execute only what the emulated robot fired, not the primitive itself
+    sim = launch("sim_node", params={"real_time_factor": 1.0, "initial_heading": 0.3},
+                 remap={"/frog/primitive": "/frog/sim/primitive_unused"})
+    odom, fired, imu = [], [], []
+    probe.node.create_subscription(Odometry, "/frog/sim/odom", odom.append, QOS)
+    probe.node.create_subscription(LimbActivation, "/frog/limb_activation", fired.append, QOS)
+    probe.node.create_subscription(Imu, "/frog/imu", imu.append, QOS)
+    sim.wait_for_log("simulating the frog", timeout=120)
+    emu, bridge, log = start_pair(launch, probe, tmp_path, emulator_params={"imu_rate_hz": 20.0})
+    pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
+    probe.wait_for_subscriber("/frog/primitive")
+    probe.spin_until(lambda: odom and imu, 15, "odometry and the IMU from the emulator")
+    start = odom[-1].pose.pose.position
+    q = imu[-1].orientation
+    assert 2 * math.atan2(q.z, q.w) == pytest.approx(0.3, abs=1e-3)   # the sim's heading, via the wire
+    publish_primitive(probe, pub, "B")                 # all four limbs: forward
+    probe.spin_until(lambda: len(fired) == 2, 5, "the emulator to fire front and rear")
+    assert [sorted(m.limbs) for m in fired] == [[0, 1], [2, 3]]
+    probe.spin_for(3.0)
+    end = odom[-1].pose.pose.position
+    dx, dy = end.x - start.x, end.y - start.y
+    moved = math.hypot(dx, dy)
+    assert moved > 2e-3, f"the frog moved only {moved * 1e3:.2f} mm"
+    # forward is along the heading 0.3 rad (within 30 deg: limbs are symmetric, B swims straight)
+    assert abs(math.atan2(dy, dx) - 0.3) < math.radians(30)
+    assert sim.stop() == 0 and emu.stop() == 0 and bridge.stop() == 0
