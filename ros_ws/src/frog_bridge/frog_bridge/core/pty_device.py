@@ -93,3 +93,31 @@ class PtyDevice:
             if exc.errno in (errno.EAGAIN, errno.EIO):
                 return b""
             raise
+
+
+class OpenedDevice(PtyDevice):
+    """An existing serial device (e.g. one end of ``socat``) used in place of a new pty.
+
+    "Unplug" closes it, "replug" opens it again; ``link_path`` is not touched.
+    """
+
+    def __init__(self, device_path: str):
+        super().__init__(link_path="")
+        self.device_path = device_path
+
+    def plug(self) -> str:
+        with self.lock:
+            if self.controller is None:
+                fd = os.open(self.device_path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+                tty.setraw(fd)
+                self.controller = fd
+            return self.device_path
+
+    def unplug(self) -> None:
+        with self.lock:
+            if self.controller is not None:
+                try:
+                    os.close(self.controller)
+                except OSError:
+                    pass
+            self.controller = None

@@ -34,10 +34,11 @@ from frog_bridge.core.emulator import (
 from frog_bridge.core.limbs import limb_names
 from frog_bridge.core.protocol import (
     QUATERNION_ORDERS, DecodeError, LineFramer, SetPulse, encode_emergency, encode_quaternion, excerpt)
-from frog_bridge.core.pty_device import PtyDevice
+from frog_bridge.core.pty_device import OpenedDevice, PtyDevice
 
 PARAMS = [
     Param("link_path", "/tmp/frog_robot_tty", "stable path linked to the emulated device (the bridge's port)"),
+    Param("device", "", "open this existing serial device instead of creating a pty (link_path unused)"),
     Param("ble_latency_s", DEFAULT_BLE_LATENCY_S, "fixed relay + BLE + firmware delay per line [s]",
           min=0.0, max=1.0),
     Param("ble_interval_s", DEFAULT_BLE_INTERVAL_S, "BLE connection interval: uniform extra delay in [0, it) [s]",
@@ -68,16 +69,19 @@ class RobotEmulator(Node):
         from soft_robot_interfaces.msg import LimbActivation
         self._LimbActivation = LimbActivation
         link = p["link_path"]
-        if os.path.lexists(link) and not os.path.islink(link):
+        if p["device"]:
+            if not os.path.exists(p["device"]):
+                raise ConfigurationError(f"device {p['device']!r} does not exist")
+        elif os.path.lexists(link) and not os.path.islink(link):
             raise ConfigurationError(f"link_path {link!r} exists and is not a symbolic link; refusing to replace it")
-        if not os.path.isdir(os.path.dirname(os.path.abspath(link))):
+        elif not os.path.isdir(os.path.dirname(os.path.abspath(link))):
             raise ConfigurationError(f"link_path {link!r}: folder does not exist")
         seed = None if p["seed"] < 0 else p["seed"]
         self.rng = np.random.default_rng(seed)
         self.ble = BleLinkModel(p["ble_latency_s"], p["ble_interval_s"], p["loss_rate"], self.rng)
         self.firmware = RobotFirmware(p["initial_pulse_ms"])
         self.framer = LineFramer(4096)
-        self.device = PtyDevice(link)
+        self.device = OpenedDevice(p["device"]) if p["device"] else PtyDevice(link)
         self.yaw: float | None = None
         self.stalled_until = 0.0
         self.counts = {"lines": 0, "fired": 0, "lost": 0, "errors": 0}
@@ -112,10 +116,14 @@ class RobotEmulator(Node):
         self._wake_r, self._wake_w = os.pipe()
         self._wake = self.create_guard_condition(self.on_lines)
         self._running = True
-        path = self.device.plug()
+        try:
+            path = self.device.plug()
+        except OSError as exc:
+            raise ConfigurationError(f"cannot open the emulated device: {exc}") from exc
         self._thread = threading.Thread(target=self._reader, name="pty_reader", daemon=True)
         self._thread.start()
-        self.get_logger().info(f"emulated relay on {link} -> {path}; BLE {p['ble_latency_s'] * 1e3:g} ms + "
+        where = path if p["device"] else f"{link} -> {path}"
+        self.get_logger().info(f"emulated relay on {where}; BLE {p['ble_latency_s'] * 1e3:g} ms + "
                                f"U(0, {p['ble_interval_s'] * 1e3:g}) ms, loss {p['loss_rate']:g}, IMU "
                                f"{p['imu_rate_hz']:g} Hz")
 
