@@ -218,6 +218,15 @@ def test_unplug_replug_reconnects_without_stale_commands_and_stall_is_reported(l
     probe.spin_for(0.4)
     assert [line for _, line in h_lines(read_log(log), after=t_new)] == ["h 1 0"]
 
+    # garbage from the relay (binary, non-UTF-8, 10 kB lines, partial lines): counted, harmless
+    imu = []
+    probe.node.create_subscription(Imu, "/frog/imu", imu.append, QOS)
+    assert trigger(probe, "/robot_emulator/inject_garbage").success
+    probe.spin_until(lambda: int(diag.values.get("decode_errors", 0)) >= 150, 5, "decode errors counted")
+    assert int(diag.values["decode_error_too_long"]) == 40 and diag.values["state"] == "ready"
+    imu.clear()
+    probe.spin_until(lambda: len(imu) >= 3, 5, "Imu messages after the garbage")
+
     # a stalled relay (no lines either way) is reported, and recovery too
     assert trigger(probe, "/robot_emulator/stall").success
     bridge.wait_for_log("link stalled", timeout=5)
@@ -343,3 +352,24 @@ def test_end_to_end_primitive_moves_the_simulated_frog(launch, probe, tmp_path):
     # forward is along the heading 0.3 rad (within 30 deg: limbs are symmetric, B swims straight)
     assert abs(math.atan2(dy, dx) - 0.3) < math.radians(30)
     assert sim.stop() == 0 and emu.stop() == 0 and bridge.stop() == 0
+
+
+def test_shutdown_between_front_and_rear_sends_no_rear(launch, probe, tmp_path):
+    from soft_robot_interfaces.msg import Primitive
+    # a 300 ms pulse leaves time to stop the bridge between the two lines of B
+    emu, bridge, log = start_pair(launch, probe, tmp_path, bridge_params={"pulse_ms": 300},
+                                  emulator_params={"imu_rate_hz": 0.0})
+    pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
+    probe.wait_for_subscriber("/frog/primitive")
+    probe.spin_for(0.2)
+    publish_primitive(probe, pub, "B")
+    end = time.monotonic() + 3
+    while not h_lines(read_log(log)) and time.monotonic() < end:
+        time.sleep(0.005)
+    assert bridge.stop() == 0 and bridge.stopped_cleanly
+    assert "shutdown: 1 pending pulse(s) cancelled" in bridge.log_text()
+    time.sleep(0.5)
+    rows = read_log(log)
+    assert [line for _, line in h_lines(rows)] == ["h 1 0"]
+    assert not [r for r in rows if r[2].startswith("error")]        # no partial line on the wire
+    assert emu.stop() == 0

@@ -82,6 +82,30 @@ class PtyDevice:
             self.dropped_bytes += len(data) - n
             return n
 
+    def write_all(self, data: bytes, timeout: float = 2.0) -> int:
+        """Write all of ``data``, waiting for the reader up to ``timeout``; returns bytes written."""
+        import select
+        import time
+        end = time.monotonic() + timeout
+        done = 0
+        while done < len(data) and time.monotonic() < end:
+            with self.lock:
+                fd = self.controller
+                if fd is None:
+                    break
+                try:
+                    done += os.write(fd, data[done:done + 4096])
+                    continue
+                except OSError as exc:
+                    if exc.errno not in (errno.EAGAIN, errno.EIO):
+                        raise
+            try:
+                select.select([], [fd], [], 0.05)
+            except (OSError, ValueError):    # unplugged meanwhile
+                break
+        self.dropped_bytes += len(data) - done
+        return done
+
     def read(self) -> bytes:
         """Read what is available (b"" if nothing; EIO while no one has the device open)."""
         fd = self.controller

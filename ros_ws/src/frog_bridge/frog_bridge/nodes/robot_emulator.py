@@ -266,7 +266,7 @@ class RobotEmulator(Node):
         n = self.cfg["garbage_lines"]
         written = 0
         for i in range(n):
-            written += self.device.write(garbage_line(self.rng, i))
+            written += self.device.write_all(garbage_line(self.rng, i))
         self.get_logger().warn(f"fault: wrote {n} garbage lines ({written} bytes)")
         response.success, response.message = True, f"{n} lines, {written} bytes"
         return response
