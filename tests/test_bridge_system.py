@@ -178,6 +178,19 @@ def test_emergency_latches_until_cleared_and_protection_refuses(launch, probe, t
     probe.spin_for(0.5)
     assert [line for _, line in h_lines(read_log(log), after=t_clear)] == ["h 1 0", "h 2 3"]
     assert trigger(probe, "/bridge_node/clear_emergency").message.startswith("no emergency")
+
+    # direct limb commands from tools (frog/limb_command): sent as one line; a pulse length
+    # other than the bridge's is refused
+    from soft_robot_interfaces.msg import LimbActivation
+    limb_pub = probe.node.create_publisher(LimbActivation, "/frog/limb_command", QOS)
+    probe.wait_for_subscriber("/frog/limb_command")
+    probe.spin_for(0.5)
+    t_cmd = time.time()
+    limb_pub.publish(LimbActivation(limbs=[3, 0], pulse_duration=0.2))
+    bridge.wait_for_log("pulse_duration 0.2 s differs", timeout=5)
+    limb_pub.publish(LimbActivation(limbs=[3, 0], pulse_duration=0.0))
+    probe.spin_for(0.3)
+    assert [line for _, line in h_lines(read_log(log), after=t_cmd)] == ["h 3 0"]
     assert emu.stop() == 0 and bridge.stop() == 0
 
 
@@ -324,26 +337,37 @@ def test_bad_configuration_exits_2(launch, tmp_path):
 
 
 def test_end_to_end_primitive_moves_the_simulated_frog(launch, probe, tmp_path):
-    """primitive -> bridge_node -> pty -> robot_emulator -> frog/limb_activation -> sim_node."""
+    """primitive -> bridge_node -> pty -> robot_emulator -> frog/limb_activation -> sim_node.
+
+    The graph runs on the simulator's /clock, as in the twin: the emulator stamps what the
+    robot fired in simulated time.
+    """
     from soft_robot_interfaces.msg import LimbActivation, Primitive
     # sim_node must execute only what the emulated robot fired, not the primitive itself
-    sim = launch("sim_node", params={"real_time_factor": 1.0, "initial_heading": 0.3},
+    sim = launch("sim_node", params={"real_time_factor": 1.0, "initial_heading": 0.3, "publish_clock": True},
                  remap={"/frog/primitive": "/frog/sim/primitive_unused"})
     odom, fired, imu = [], [], []
     probe.node.create_subscription(Odometry, "/frog/sim/odom", odom.append, QOS)
     probe.node.create_subscription(LimbActivation, "/frog/limb_activation", fired.append, QOS)
     probe.node.create_subscription(Imu, "/frog/imu", imu.append, QOS)
     sim.wait_for_log("simulating the frog", timeout=120)
-    emu, bridge, log = start_pair(launch, probe, tmp_path, emulator_params={"imu_rate_hz": 20.0})
+    emu, bridge, log = start_pair(launch, probe, tmp_path, bridge_params={"use_sim_time": True},
+                                  emulator_params={"imu_rate_hz": 20.0, "use_sim_time": True})
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     probe.wait_for_subscriber("/frog/primitive")
     probe.spin_until(lambda: odom and imu, 15, "odometry and the IMU from the emulator")
     start = odom[-1].pose.pose.position
     q = imu[-1].orientation
     assert 2 * math.atan2(q.z, q.w) == pytest.approx(0.3, abs=1e-3)   # the sim's heading, via the wire
-    publish_primitive(probe, pub, "B")                 # all four limbs: forward
+    msg = Primitive(id=NAMES.index("B"), name="B")                   # all four limbs: forward
+    msg.header.stamp = odom[-1].header.stamp                         # chosen now, in sim time
+    pub.publish(msg)
     probe.spin_until(lambda: len(fired) == 2, 5, "the emulator to fire front and rear")
     assert [sorted(m.limbs) for m in fired] == [[0, 1], [2, 3]]
+    sim_now = odom[-1].header.stamp.sec + odom[-1].header.stamp.nanosec * 1e-9
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in fired]
+    assert all(abs(t - sim_now) < 1.0 for t in stamps), (stamps, sim_now)   # sim time, not wall time
+    assert 0.05 < stamps[1] - stamps[0] < 0.15                            # rear one pulse after front
     probe.spin_for(3.0)
     end = odom[-1].pose.pose.position
     dx, dy = end.x - start.x, end.y - start.y

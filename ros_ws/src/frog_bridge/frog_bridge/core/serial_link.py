@@ -85,8 +85,9 @@ class SerialLink:
             if port is None or self.supervisor.connection is LinkState.DISCONNECTED:
                 return "port is not open"
             try:
+                # pyserial writes straight to the descriptor; no flush(): that is tcdrain(), which
+                # would block the caller for the whole transmission on a real UART
                 n = port.write(line)
-                port.flush()
             except (serial.SerialException, OSError) as exc:   # includes SerialTimeoutException
                 problem = f"write failed: {exc}"
             else:
