@@ -398,3 +398,45 @@ def test_shutdown_between_front_and_rear_sends_no_rear(launch, probe, tmp_path):
     assert [line for _, line in h_lines(rows)] == ["h 1 0"]
     assert not [r for r in rows if r[2].startswith("error")]        # no partial line on the wire
     assert emu.stop() == 0
+
+
+def test_parameters_described_and_a_device_that_appears_later(launch, probe, tmp_path):
+    """ros2 param describe shows ranges; a port missing at start is retried until it appears."""
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import ParameterType, ParameterValue
+    from rcl_interfaces.srv import DescribeParameters, ListParameters, SetParameters
+    link = tmp_path / "late_tty"
+    bridge = launch("bridge_node", params={"port": str(link), "settle_s": 0.1, "reconnect_period_s": 0.2,
+                                           "reconnect_max_period_s": 0.5})
+    diag = Diag(probe)
+    for name in ("bridge_node",):
+        lister = probe.node.create_client(ListParameters, f"/{name}/list_parameters")
+        describe = probe.node.create_client(DescribeParameters, f"/{name}/describe_parameters")
+        probe.wait_for_service(lister, timeout=60)
+        names = list(probe.call(lister, ListParameters.Request()).result.names)
+        descs = probe.call(describe, DescribeParameters.Request(names=names)).descriptors
+        for d in descs:
+            if d.type in (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_INTEGER):
+                assert d.floating_point_range or d.integer_range, d.name
+            assert d.description or d.name in ("use_sim_time", "start_type_description_service"), d.name
+        assert {d.name for d in descs} >= {"port", "pulse_ms", "min_limb_interval_s", "max_duty_cycle",
+                                            "reconnect_period_s", "quaternion_order"}
+    probe.spin_until(lambda: diag.values.get("state") == "disconnected", 10, "diagnostics: disconnected")
+    assert diag.level == 2 and "No such file" in diag.message
+    assert bridge.running()
+    # the device appears (USB plugged in after the bridge started)
+    emu = launch("robot_emulator", params={"link_path": str(link), "imu_rate_hz": 0.0})
+    bridge.wait_for_log("link ready", timeout=10)
+    probe.spin_until(lambda: diag.values.get("state") == "ready", 5, "diagnostics: ready")
+    # live emulator parameters are range-checked
+    setter = probe.node.create_client(SetParameters, "/robot_emulator/set_parameters")
+    probe.wait_for_service(setter)
+
+    def set_double(name, value):
+        p = ParameterMsg(name=name, value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value))
+        return probe.call(setter, SetParameters.Request(parameters=[p])).results[0]
+    assert set_double("stall_duration_s", 0.5).successful
+    bad = set_double("stall_duration_s", -1.0)
+    assert not bad.successful and "range" in bad.reason
+    assert not set_double("loss_rate", 0.5).successful          # read-only
+    assert emu.stop() == 0 and bridge.stop() == 0
