@@ -440,3 +440,21 @@ def test_parameters_described_and_a_device_that_appears_later(launch, probe, tmp
     assert not bad.successful and "range" in bad.reason
     assert not set_double("loss_rate", 0.5).successful          # read-only
     assert emu.stop() == 0 and bridge.stop() == 0
+
+
+def test_cli_sends_primitives_and_limb_commands(launch, probe, tmp_path):
+    emu, bridge, log = start_pair(launch, probe, tmp_path, emulator_params={"imu_rate_hz": 0.0})
+    t0 = time.time()
+    cli = launch("frog-bridge", "primitive", "C")
+    assert cli.wait(30) == 0 and "sent primitive C on /frog/primitive" in cli.log_text()
+    time.sleep(0.9)
+    cli = launch("frog-bridge", "limbs", "FR", "br")
+    assert cli.wait(30) == 0
+    time.sleep(0.3)
+    assert [line for _, line in h_lines(read_log(log), after=t0)] == ["h 0", "h 2 3", "h 1 3"]
+    for bad in (["primitive", "Z"], ["limbs", "XX"], ["limbs", "FL", "0"]):
+        cli = launch("frog-bridge", *bad)
+        assert cli.wait(30) == 2, bad
+    cli = launch("frog-bridge", "clear-emergency")
+    assert cli.wait(30) == 0 and "no emergency was latched" in cli.log_text()
+    assert emu.stop() == 0 and bridge.stop() == 0

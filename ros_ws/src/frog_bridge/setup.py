@@ -20,6 +20,7 @@ setup(
         'console_scripts': [
             'bridge_node = frog_bridge.nodes.bridge_node:main',
             'robot_emulator = frog_bridge.nodes.robot_emulator:main',
+            'frog-bridge = frog_bridge.cli:main',
         ],
     },
 )
