@@ -56,7 +56,10 @@ def start_pair(launch, probe, tmp_path, bridge_params=None, emulator_params=None
     emu = launch("robot_emulator", params={"link_path": link, "command_log": str(log), "seed": 1,
                                            **(emulator_params or {})})
     emu.wait_for_log("emulated relay on", timeout=30)
-    bridge = launch("bridge_node", params={"port": link, "settle_s": 0.1, **(bridge_params or {})})
+    quiet = (emulator_params or {}).get("imu_rate_hz", 20.0) == 0
+    # a relay that sends no lines would be "stalled" and refuse commands: no stall timeout then
+    bridge = launch("bridge_node", params={"port": link, "settle_s": 0.1, **({"stall_timeout_s": 0.0} if quiet else {}),
+                                           **(bridge_params or {})})
     bridge.wait_for_log("link ready", timeout=30)
     probe.wait_for_subscriber("/frog/primitive", timeout=20)
     return emu, bridge, log
@@ -242,11 +245,22 @@ def test_unplug_replug_reconnects_without_stale_commands_and_stall_is_reported(l
     probe.spin_until(lambda: len(imu) >= 3, 5, "Imu messages after the garbage")
 
     # a stalled relay (no lines either way) is reported, and recovery too
+    probe.spin_for(1.0)
     assert trigger(probe, "/robot_emulator/stall").success
-    bridge.wait_for_log("link stalled", timeout=5)
+    stalled_before = bridge.log_text().count("link stalled")
+    probe.spin_until(lambda: bridge.log_text().count("link stalled") > stalled_before, 5, "a stall report")
     probe.spin_until(lambda: diag.values.get("stalled") == "true", 5, "diagnostics: stalled")
     assert diag.level == 1
-    bridge.wait_for_log("link alive again", timeout=5)
+    publish_primitive(probe, pub, "B")                 # refused while stalled: nothing to arrive late
+    bridge.wait_for_log(r"primitive B: link stalled \(no line from the relay for \d\.\d s\)", timeout=5)
+    alive_before = bridge.log_text().count("link alive again")
+    probe.spin_until(lambda: bridge.log_text().count("link alive again") > alive_before, 5, "the link alive again")
+    probe.spin_for(0.3)
+    t_alive = time.time()
+    publish_primitive(probe, pub, "B")
+    probe.spin_for(0.4)
+    assert [line for _, line in h_lines(read_log(log), after=t_new)] == ["h 1 0", "h 1 0", "h 2 3"]
+    assert all(t > t_alive for t, _ in h_lines(read_log(log), after=t_new)[1:])
     assert emu.stop() == 0 and bridge.stop() == 0
 
 

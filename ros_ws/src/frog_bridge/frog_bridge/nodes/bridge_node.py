@@ -33,7 +33,7 @@ from frog_bridge.core.protocol import (
     encode_heat, encode_set_pulse, excerpt)
 from frog_bridge.core.schedule import (
     CANCELLED_EMERGENCY, CANCELLED_LINK, CANCELLED_SHUTDOWN, REFUSED_EMERGENCY, REFUSED_INVALID, REFUSED_LINK,
-    CommandScheduler)
+    REFUSED_STALLED, CommandScheduler)
 from frog_bridge.core.serial_link import SerialLink
 
 PARAMS = [
@@ -54,6 +54,8 @@ PARAMS = [
     Param("settle_s", 1.0, "wait after opening the port before writing to it [s]", min=0.0, max=30.0),
     Param("stall_timeout_s", 2.0, "no line from the relay for this long is reported as a stalled link [s]; "
           "0 = never", min=0.0, max=600.0),
+    Param("stall_blocks_actuation", True, "refuse commands while the link is stalled (the relay or robot may not be "
+          "receiving; lines written now could arrive late); set stall_timeout_s 0 for a robot that sends no lines"),
     Param("write_timeout_s", 0.05, "a line not written within this is a lost link [s]", min=0.001, max=5.0),
     Param("max_line_bytes", 256, "longer lines from the relay are discarded", min=16, max=65536),
     Param("quaternion_order", "wxyz", "order of the four numbers of a 'Central: Q' line",
@@ -172,7 +174,13 @@ class BridgeNode(Node):
             self.get_logger().warn(f"refused: {reason}")
 
     def _link_allows(self, what: str) -> bool:
-        state = self._state()
+        now = time.monotonic()
+        with self.link.lock:
+            state, stalled, age = self.supervisor.state, self.supervisor.stalled(now), self.supervisor.line_age(now)
+        if state is LinkState.READY and stalled and self.cfg["stall_blocks_actuation"]:
+            since = "ever" if age is None else f"{age:.1f} s"
+            self._refuse(REFUSED_STALLED, f"{what}: link stalled (no line from the relay for {since})", throttle=True)
+            return False
         if state is LinkState.READY:
             return True
         if state is LinkState.EMERGENCY:
@@ -200,6 +208,7 @@ class BridgeNode(Node):
             problem = self.link.write_line(encode_heat(p.limbs))
             if problem:
                 self.get_logger().error(f"{p.label} pulse not sent: {problem}")
+                self.scheduler.count_refusal(CANCELLED_LINK)
                 self.scheduler.cancel_all(CANCELLED_LINK)
                 break
             self.write_latency_ms.append((time.perf_counter() - t_in) * 1e3)
