@@ -61,6 +61,7 @@ def main(argv=None) -> int:
         print(f"frog-bridge: limbs {args.limbs} repeat an id", file=sys.stderr)
         return 2
     import rclpy
+    from rclpy.duration import Duration
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from soft_robot_interfaces.msg import LimbActivation, Primitive
     from std_srvs.srv import Trigger
@@ -94,8 +95,13 @@ def main(argv=None) -> int:
         if pub.get_subscription_count() == 0:
             print(f"frog-bridge: nobody subscribes to {pub.topic_name}", file=sys.stderr)
             return 1
+        # the bridge must also have matched this writer, or it drops the sample: give discovery
+        # a moment, then wait for the acknowledgement (reliable QoS) before the process exits
+        rclpy.spin_once(node, timeout_sec=0.3)
         pub.publish(msg)
-        rclpy.spin_once(node, timeout_sec=0.3)      # let DDS deliver before the process exits
+        if not pub.wait_for_all_acked(Duration(seconds=max(end - time.monotonic(), 1.0))):
+            print(f"frog-bridge: {what} was not acknowledged by the bridge", file=sys.stderr)
+            return 1
         print(f"sent {what} on {pub.topic_name}")
         return 0
     finally:

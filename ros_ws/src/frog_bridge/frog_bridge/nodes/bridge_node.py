@@ -174,6 +174,10 @@ class BridgeNode(Node):
             self.get_logger().warn(f"refused: {reason}")
 
     def _link_allows(self, what: str) -> bool:
+        if self.get_clock().now().nanoseconds == 0:
+            self._refuse(REFUSED_LINK, f"{what}: the node clock has not started (use_sim_time and no /clock yet)",
+                         throttle=True)
+            return False
         now = time.monotonic()
         with self.link.lock:
             state, stalled, age = self.supervisor.state, self.supervisor.stalled(now), self.supervisor.line_age(now)
