@@ -4,8 +4,10 @@ Real processes on an isolated ROS domain and a real pty: this process publishes
 Primitive H (one line, ``h 1``) and times the first byte arriving on the pty's controller
 side; it writes ``Central: Q ...`` lines and times the Imu message arriving. Both clocks are
 this process's ``time.perf_counter``. The same hops are timed through a bare rclpy process
-(bench/bridge_baseline_node.py: subscribe -> os.write, read -> publish, no checks) in the
-same run; the ratio says what the bridge's framing, protection and scheduling cost.
+(bench/bridge_baseline_node.py: subscribe -> os.write, read -> publish, no checks) running
+at the same time on its own pty and namespace, samples alternating between the two, so both
+see the same machine load; the ratio says what the bridge's framing, protection and
+scheduling cost.
 Target (issue 13): median <= 2 ms, p99 <= 5 ms for both directions.
 
     ./dev bench bridge_latency [--samples 300] [--rate 10]
@@ -37,7 +39,7 @@ def percentile(xs, q):
 
 
 class Probe:
-    def __init__(self, domain_id):
+    def __init__(self, domain_id, namespaces):
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -49,10 +51,12 @@ class Probe:
         self.node = rclpy.create_node("bench_probe", context=self.ctx)
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.Primitive = Primitive
-        self.pub = self.node.create_publisher(Primitive, "/frog/primitive", qos)
-        self.imu_at = None
-        self.imu_event = threading.Event()
-        self.node.create_subscription(Imu, "/frog/imu", self._on_imu, qos)
+        self.namespaces = namespaces
+        self.pubs = {ns: self.node.create_publisher(Primitive, f"{ns}/frog/primitive", qos) for ns in namespaces}
+        self.imu_at = {ns: None for ns in namespaces}
+        self.imu_event = {ns: threading.Event() for ns in namespaces}
+        for ns in namespaces:
+            self.node.create_subscription(Imu, f"{ns}/frog/imu", lambda m, ns=ns: self._on_imu(ns), qos)
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
@@ -66,17 +70,18 @@ class Probe:
         except ExternalShutdownException:
             pass
 
-    def _on_imu(self, msg):
-        self.imu_at = time.perf_counter()
-        self.imu_event.set()
+    def _on_imu(self, ns):
+        self.imu_at[ns] = time.perf_counter()
+        self.imu_event[ns].set()
 
     def wait_matched(self, timeout=30):
         end = time.monotonic() + timeout
         while time.monotonic() < end:
-            if self.pub.get_subscription_count() >= 1 and self.node.count_publishers("/frog/imu") >= 1:
+            if all(self.pubs[ns].get_subscription_count() >= 1 and self.node.count_publishers(f"{ns}/frog/imu") >= 1
+                   for ns in self.namespaces):
                 return
             time.sleep(0.05)
-        raise TimeoutError("the node under test did not subscribe/publish in time")
+        raise TimeoutError("the nodes under test did not subscribe/publish in time")
 
     def primitive(self):
         m = self.Primitive(id=7, name="H")
@@ -88,60 +93,76 @@ class Probe:
         self.thread.join(2)
 
 
-def measure(probe, controller, samples, rate):
-    """(primitive -> first byte latencies, Q line -> Imu latencies) in ms."""
-    out_lat, in_lat = [], []
+def measure(probe, controllers, samples, rate):
+    """{ns: (primitive -> first byte latencies, Q line -> Imu latencies)} in ms; targets alternate."""
+    out = {ns: ([], []) for ns in controllers}
     period = 1.0 / rate
     line = b"Central: Q 0.9239 0.0000 0.0000 0.3827\r\n"
     for i in range(samples + 10):
-        # drain anything pending (the rest of a line)
-        while select.select([controller], [], [], 0)[0]:
-            os.read(controller, 4096)
-        msg = probe.primitive()
-        t0 = time.perf_counter()
-        probe.pub.publish(msg)
-        if select.select([controller], [], [], 1.0)[0]:
-            t1 = time.perf_counter()
-            os.read(controller, 4096)
-            if i >= 10:
-                out_lat.append((t1 - t0) * 1e3)
-        time.sleep(period / 2)
-        probe.imu_event.clear()
-        t0 = time.perf_counter()
-        os.write(controller, line)
-        if probe.imu_event.wait(1.0) and i >= 10:
-            in_lat.append((probe.imu_at - t0) * 1e3)
-        time.sleep(period / 2)
-    return out_lat, in_lat
+        for ns, controller in controllers.items():
+            while select.select([controller], [], [], 0)[0]:
+                os.read(controller, 4096)          # the rest of a line
+            msg = probe.primitive()
+            t0 = time.perf_counter()
+            probe.pubs[ns].publish(msg)
+            if select.select([controller], [], [], 1.0)[0]:
+                t1 = time.perf_counter()
+                os.read(controller, 4096)
+                if i >= 10:
+                    out[ns][0].append((t1 - t0) * 1e3)
+            time.sleep(period / 4)
+            probe.imu_event[ns].clear()
+            t0 = time.perf_counter()
+            os.write(controller, line)
+            if probe.imu_event[ns].wait(1.0) and i >= 10:
+                out[ns][1].append((probe.imu_at[ns] - t0) * 1e3)
+            time.sleep(period / 4)
+    return out
 
 
-def run(kind, domain, tmp, samples, rate):
+def start(kind, domain, tmp):
     controller, device, path = open_pty_pair()
     if kind == "bridge_node":
         # protection off so the bench can send at `rate` (the checks still run on every command)
         argv = ["bridge_node", *ros_args({"port": path, "settle_s": 0.1, "stall_timeout_s": 0.0,
-                                          "min_limb_interval_s": 0.0, "max_duty_cycle": 1.0})]
+                                          "min_limb_interval_s": 0.0, "max_duty_cycle": 1.0},
+                                         remap={"__ns": "/" + kind})]
         ready = "link ready"
     else:
-        argv = [sys.executable, str(ROOT / "bench" / "bridge_baseline_node.py"), path]
+        argv = [sys.executable, str(ROOT / "bench" / "bridge_baseline_node.py"), path,
+                *ros_args(remap={"__ns": "/" + kind})]
         ready = "baseline ready"
     proc = NodeProcess(argv, domain.env, Path(tmp) / f"{kind}.log", kind)
+    proc.wait_for_log(ready, 30)
+    return proc, controller, device
+
+
+def run(domain, tmp, samples, rate):
+    """Both processes at once on their own pty and namespace; samples alternate between them."""
+    kinds = ("baseline", "bridge_node")
+    started = {}
     try:
-        proc.wait_for_log(ready, 30)
-        probe = Probe(domain.domain_id)
+        for kind in kinds:
+            started[kind] = start(kind, domain, tmp)
+        probe = Probe(domain.domain_id, ["/" + k for k in kinds])
         probe.wait_matched()
         time.sleep(0.5)
-        while select.select([controller], [], [], 0)[0]:
-            os.read(controller, 4096)          # the bridge's "p 80"
-        cpu0, wall0 = cpu_seconds(proc.pid), time.perf_counter()
-        out_lat, in_lat = measure(probe, controller, samples, rate)
-        cpu, wall = cpu_seconds(proc.pid) - cpu0, time.perf_counter() - wall0
+        controllers = {"/" + k: started[k][1] for k in kinds}
+        for c in controllers.values():
+            while select.select([c], [], [], 0)[0]:
+                os.read(c, 4096)               # the bridge's "p 80"
+        cpu0 = {k: cpu_seconds(started[k][0].pid) for k in kinds}
+        wall0 = time.perf_counter()
+        lat = measure(probe, controllers, samples, rate)
+        wall = time.perf_counter() - wall0
+        cpu = {k: cpu_seconds(started[k][0].pid) - cpu0[k] for k in kinds}
         probe.close()
     finally:
-        proc.stop()
-        for fd in (controller, device):
-            os.close(fd)
-    return out_lat, in_lat, cpu, wall
+        for proc, controller, device in started.values():
+            proc.stop()
+            os.close(controller)
+            os.close(device)
+    return {k: (*lat["/" + k], cpu[k], wall) for k in kinds}
 
 
 def main():
@@ -151,11 +172,8 @@ def main():
     args = ap.parse_args()
     domain = acquire_domain()
     load0 = os.getloadavg()
-    results = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for kind in ("baseline", "bridge_node"):
-            results[kind] = run(kind, domain, tmp, args.samples, args.rate)
-            print(f"{kind}: done", flush=True)
+        results = run(domain, tmp, args.samples, args.rate)
     domain.release()
     load1 = os.getloadavg()
     print(f"\nload average (1 min) {load0[0]:.2f} before, {load1[0]:.2f} after; {os.cpu_count()} cores")
