@@ -6,6 +6,9 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    # the shipped eq. 9 fit (frog_sim/data/actuation_fit.json): needed at run time
+    package_data={package_name: ['data/*.json']},
+    include_package_data=True,
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

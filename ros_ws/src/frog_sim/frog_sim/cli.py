@@ -26,6 +26,7 @@ EXAMPLES = """examples:
   frog-sim primitives --sequence 0,3,3,5 --forward 0.02 --lateral -0.01
   frog-sim params
   frog-sim fit
+  FROG_DATA_DIR=../shared/data/frog frog-sim fit --write-package-data
   frog-sim validate --out runs/validation
   frog-sim convergence --out runs/convergence
 """
@@ -86,7 +87,16 @@ def build_parser() -> argparse.ArgumentParser:
                     help='pulse length [s]: rear delay (default 0.08)')
     _add_common(pr)
     sub.add_parser('params', help='print the parameter table with sources')
-    sub.add_parser('fit', help='print the eq. 9 fit of every measured profile')
+    ft = sub.add_parser('fit', help='print the eq. 9 fit of every measured profile; regenerate the shipped fit',
+                        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ft.add_argument('--refit', action='store_true',
+                    help='refit from the measurements (FROG_DATA_DIR or shared/data/frog) instead of '
+                         'printing the shipped fit')
+    ft.add_argument('--write-package-data', action='store_true',
+                    help='refit from the measurements and write the result as the shipped package data '
+                         '(frog_sim/data/actuation_fit.json in the source tree)')
+    ft.add_argument('--output', type=Path, default=None,
+                    help='with --write-package-data: write here instead of the package data file')
     v = sub.add_parser('validate', help='speed vs calibration runs (10 %% EGaIn, phase 0.5)')
     v.add_argument('--dt', type=_positive('--dt'), default=None)
     v.add_argument('--out', type=Path, default=None)
@@ -233,14 +243,27 @@ def cmd_params(args):
 
 
 def cmd_fit(args):
-    from .core.actuation import ActuationLibrary
-    lib = ActuationLibrary.load()
-    print(f'eq. 9 fit, cache: {lib.source.get("cache_file", "(loaded from cache)")}')
+    from .core.actuation import DATA_FILE_NAME, ActuationLibrary, find_data_dir, package_fit_path
+    if args.write_package_data or args.refit:
+        lib = ActuationLibrary.fit_file(find_data_dir() / DATA_FILE_NAME, use_cache=not args.write_package_data)
+    else:
+        lib = ActuationLibrary.load()
+    src = lib.source
+    print(f'eq. 9 fit from {src.get("loaded_from")} (data sha256 {str(src.get("data_sha256"))[:16]}, '
+          f'fit version {src.get("fit_version")}, code {src.get("code_version")}, '
+          f'checked against the measurements: {src.get("verified")})')
     print(f'{"EGaIn %":>7s} {"f Hz":>5s} {"t0 s":>6s} {"kappa_relaxed":>13s} {"kappa_min":>9s} {"RMS 1/m":>8s}')
     for p in lib.profiles.values():
         t = np.linspace(0, p.cycle_time, 400)
         print(f'{p.egain_vol_pct:7.0f} {p.frequency_hz:5.1f} {p.switch_time:6.3f} {p.relaxed_curvature:13.1f} '
               f'{p.curvature(t).min():9.1f} {p.rms_error:8.2f}')
+    if args.write_package_data:
+        # the source tree's file (resolve: a symlink install links the package to the sources)
+        target = args.output or Path(__file__).resolve().parent.joinpath('data', 'actuation_fit.json')
+        lib.write_json(target)
+        print(f'wrote {target}')
+        if args.output is None and package_fit_path().resolve() != target.resolve():
+            print(f'note: the installed package reads {package_fit_path()}; rebuild to install the new file')
 
 
 def cmd_validate(args):

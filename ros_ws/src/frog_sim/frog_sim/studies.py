@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .core.actuation import CALIBRATION_FILE_NAME, ActuationLibrary, find_data_dir
+from .core.actuation import CALIBRATION_FILE_NAME, ActuationLibrary, find_data_file
 from .core.model_parameters import FrogParameters
 from .core.simulation import DEFAULT_TIME_STEP, FrogSimulation
 
@@ -29,7 +29,7 @@ def measured_speeds(skip_cycles: float = 2.0) -> dict:
         ``{frequency_hz: {'long': v, 'three_cycles': v}}``.
     """
     rows: dict = {}
-    with open(find_data_dir() / CALIBRATION_FILE_NAME, newline='') as fh:
+    with open(find_data_file(CALIBRATION_FILE_NAME), newline='') as fh:
         for r in csv.DictReader(fh):
             key = (round(float(r['frequency_hz']), 1), r['recording'])
             rows.setdefault(key, []).append((float(r['t_s']), float(r['forward_distance_m'])))

@@ -41,8 +41,8 @@ def test_frog_model_geometry_matches_paper():
     assert all(len(r[3]) > 5 for r in rows)                       # every parameter has a source
 
 
-def test_actuation_fit_reproduces_measured_profiles(library):
-    data = read_curvature_profiles()
+def test_actuation_fit_reproduces_measured_profiles(library, measured_file):
+    data = read_curvature_profiles(measured_file("limb_curvature_profiles.csv"))
     assert len(library.profiles) == len(data) == 48
     for key, (t, kappa) in data.items():
         prof = library.profiles[key]
@@ -167,3 +167,28 @@ def test_symmetric_gait_swims_forward_without_turning(library):
     assert traj.com[-1, 0] > 0.02                                   # forward (+x)
     assert np.degrees(abs(traj.heading[-1] - traj.heading[0])) < 1.0
     assert abs(traj.com[-1, 1]) < 1e-3 * traj.com[-1, 0] + 1e-9
+
+
+def test_every_parameter_has_a_range_or_choices_and_a_unit():
+    """One table (dataclass metadata) for descriptors and validation (issue 10)."""
+    from dataclasses import fields
+
+    from frog_sim.core.model_parameters import parameter_range, parameter_specs, parameter_unit
+    defaults = FrogParameters()
+    specs = {s["name"]: s for s in parameter_specs()}
+    assert set(specs) == {f.name for f in fields(FrogParameters)}
+    for f in fields(FrogParameters):
+        value = getattr(defaults, f.name)
+        assert parameter_unit(f.name) == f.metadata["unit"]
+        if isinstance(value, str):
+            assert value in specs[f.name]["choices"] and parameter_range(f.name) is None
+            continue
+        lo, hi = parameter_range(f.name)
+        assert lo < hi and lo <= value <= hi, f.name
+        # just outside the range is refused with the name, the value and the range
+        bad = hi * 1.5 + 1.0
+        with pytest.raises(ValueError, match=rf"{f.name} = .* outside its plausible range"):
+            defaults.replace(**{f.name: type(value)(bad)})
+    assert parameter_range("body_mass") == (0.02, 1.0) and parameter_unit("body_mass") == "kg"
+    with pytest.raises(KeyError, match="did you mean 'body_mass'"):
+        parameter_range("body_mas")

@@ -7,10 +7,11 @@ from frog_sim.core.model_parameters import FrogParameters
 from frog_sim.studies import displacement_after_cycles, measured_speeds, speed_validation
 
 
-def test_steady_speed_matches_calibration_runs():
+def test_steady_speed_matches_calibration_runs(measured_file):
     """10 % EGaIn, phase 0.5, 0.4-1.1 Hz vs the measured runs (paper: good agreement).
     Measured speeds rise from ~22 to ~56 mm/s; the model must follow within 8 mm/s RMS and
     rise with frequency like the measurements."""
+    measured_file("calibration_runs_10pct.csv")
     rows, rms = speed_validation()
     sim = np.array([r.simulated for r in rows])
     meas = np.array([r.measured for r in rows])
@@ -23,7 +24,8 @@ def test_steady_speed_matches_calibration_runs():
     assert np.all(np.abs(sim - meas) < 0.012)
 
 
-def test_measured_speeds_read_from_the_data_file():
+def test_measured_speeds_read_from_the_data_file(measured_file):
+    measured_file("calibration_runs_10pct.csv")
     m = measured_speeds()
     assert sorted(m) == pytest.approx([0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2])
     assert 0.018 < m[0.4]["long"] < 0.028 and 0.05 < m[1.1]["long"] < 0.06

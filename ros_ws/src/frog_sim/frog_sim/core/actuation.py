@@ -9,9 +9,22 @@
 curvature minimum (end of the actuation phase). After the measured cycle
 (t >= 1/f) a limb that is not fired again holds the end-of-cycle curvature.
 
-The fitted coefficients are a generated artefact: they are cached as JSON in
-``$FROG_SIM_CACHE_DIR`` (default ``~/.cache/frog_sim``), keyed by the SHA-1 of the
-data file and the fit version, with the RMS fit error of each profile; never in git.
+Where the coefficients come from (issue 10, "runs anywhere")
+-----------------------------------------------------------
+The project's own fit of every measured profile ships with the package as
+``frog_sim/data/actuation_fit.json`` (coefficients per EGaIn and frequency, each fit's
+RMS, the sha256 of the profile CSV it came from, fit and code version). At run time
+:meth:`ActuationLibrary.load` uses it, so a clone without the measurements runs. The raw
+measurements are used only when they are given (``$FROG_DATA_DIR`` or an ancestor's
+``shared/data/frog``) and:
+
+* a refit is asked for (``refit=True`` or ``$FROG_SIM_REFIT=1``), or
+* their sha256 differs from the one recorded in the shipped fit: then the shipped fit is
+  stale for these data; the data are refitted (cached in ``$FROG_SIM_CACHE_DIR``, default
+  ``~/.cache/frog_sim``) and a ``StaleFitWarning`` names both hashes. A mismatch is never
+  ignored silently; ``frog-sim fit --write-package-data`` regenerates the shipped file.
+
+With no data at hand the shipped fit is used as is (``source['verified'] = False``).
 
 Stiffness: while a limb is in its actuation phase (0 <= t < t0, SMA hot) its Young's
 modulus is E_max, otherwise E_0 (paper: E_0 = 3.0 MPa, E_max = 8.04 MPa).
@@ -32,30 +45,78 @@ from numba import njit
 from scipy.optimize import curve_fit
 
 FIT_VERSION = 1
+#: Package-data file of the shipped fit (relative to the ``frog_sim`` package).
+PACKAGE_FIT_FILE = ('data', 'actuation_fit.json')
 DATA_FILE_NAME = 'limb_curvature_profiles.csv'
 CALIBRATION_FILE_NAME = 'calibration_runs_10pct.csv'
 
 
-def find_data_dir() -> Path:
+class StaleFitWarning(UserWarning):
+    """The shipped eq. 9 fit was made from other data than the measurements at hand."""
+
+
+def find_data_dir(required: str = DATA_FILE_NAME) -> Path:
     """Directory with the frog measurements (``$FROG_DATA_DIR`` or ``<ancestor>/shared/data/frog``).
+
+    Parameters
+    ----------
+    required : str
+        File the directory must hold (default the limb curvature profiles).
 
     Raises
     ------
     FileNotFoundError
-        If no directory holding ``limb_curvature_profiles.csv`` is found.
+        If no directory holding ``required`` is found (the message names the file).
     """
     env = os.environ.get('FROG_DATA_DIR')
     if env:
         path = Path(env)
-        if (path / DATA_FILE_NAME).is_file():
+        if (path / required).is_file():
             return path
-        raise FileNotFoundError(f'FROG_DATA_DIR={env} does not contain {DATA_FILE_NAME}')
+        raise FileNotFoundError(f'FROG_DATA_DIR={env} does not contain {required}')
     for parent in Path(__file__).resolve().parents:
         for cand in (parent / 'shared' / 'data' / 'frog', parent.parent / 'shared' / 'data' / 'frog'):
-            if (cand / DATA_FILE_NAME).is_file():
+            if (cand / required).is_file():
                 return cand
-    raise FileNotFoundError(f'{DATA_FILE_NAME} not found; set FROG_DATA_DIR to the folder '
+    raise FileNotFoundError(f'{required} not found; set FROG_DATA_DIR to the folder '
                             'with the frog measurements (shared/data/frog)')
+
+
+def find_data_file(name: str) -> Path:
+    """Path of one measurement file (see :func:`find_data_dir`); ``name`` may hold a sub-folder."""
+    return find_data_dir(name) / name
+
+
+def optional_data_dir() -> Path | None:
+    """:func:`find_data_dir`, or ``None`` when no measurements are at hand.
+
+    An explicit ``$FROG_DATA_DIR`` that lacks the profiles still counts as "not given"
+    here (callers that need the data raise with :func:`find_data_dir`'s message).
+    """
+    try:
+        return find_data_dir()
+    except FileNotFoundError:
+        return None
+
+
+def file_sha256(path: Path | str) -> str:
+    """Hex sha256 of a file's bytes."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def package_fit_path() -> Path:
+    """Location of the shipped fit (``frog_sim/data/actuation_fit.json``)."""
+    from importlib.resources import files
+    return Path(str(files('frog_sim').joinpath(*PACKAGE_FIT_FILE)))
+
+
+def code_version() -> str:
+    """Installed ``frog_sim`` distribution version (or ``'unknown'``)."""
+    try:
+        from importlib.metadata import version
+        return version('frog_sim')
+    except Exception:  # pragma: no cover - not installed as a distribution
+        return 'unknown'
 
 
 def cache_dir() -> Path:
@@ -192,35 +253,111 @@ class ActuationLibrary:
         self.source = source
 
     @classmethod
-    def load(cls, data_path: Path | str | None = None, use_cache: bool = True) -> 'ActuationLibrary':
-        """Load the cached fit for ``data_path`` or fit all profiles and cache them."""
-        path = Path(data_path) if data_path else find_data_dir() / DATA_FILE_NAME
-        digest = hashlib.sha1(path.read_bytes()).hexdigest()
-        cache_file = cache_dir() / f'actuation_fit_v{FIT_VERSION}_{digest[:12]}.json'
-        if use_cache and cache_file.is_file():
+    def load(cls, data_path: Path | str | None = None, use_cache: bool = True,
+             refit: bool | None = None) -> 'ActuationLibrary':
+        """The eq. 9 fit to use: the shipped one, or a refit of the measurements at hand.
+
+        Parameters
+        ----------
+        data_path : path, optional
+            A profile CSV to fit (always fitted, cached by its sha256).
+        use_cache : bool
+            Read/write refits in :func:`cache_dir`.
+        refit : bool, optional
+            Refit from the measurements (``$FROG_DATA_DIR`` / ancestor ``shared/data/frog``)
+            even if they match the shipped fit. Default: ``$FROG_SIM_REFIT == '1'``.
+
+        Raises
+        ------
+        FileNotFoundError
+            If a refit is asked for without data, or the shipped fit is missing and no
+            data are at hand.
+
+        Warns
+        -----
+        StaleFitWarning
+            If the measurements at hand differ from those of the shipped fit (then they
+            are refitted and used).
+        """
+        if data_path is not None:
+            return cls.fit_file(data_path, use_cache=use_cache)
+        if refit is None:
+            refit = os.environ.get('FROG_SIM_REFIT', '') == '1'
+        data_dir = optional_data_dir()
+        if refit:
+            return cls.fit_file(find_data_dir() / DATA_FILE_NAME, use_cache=use_cache)
+        shipped = None
+        shipped_path = package_fit_path()
+        try:
+            shipped = cls._from_json(json.loads(shipped_path.read_text()))
+        except FileNotFoundError:
+            pass
+        except (ValueError, KeyError, TypeError) as exc:
+            warnings.warn(f'shipped eq. 9 fit {shipped_path} is unreadable ({exc}); refitting',
+                          StaleFitWarning, stacklevel=2)
+        if data_dir is None:
+            if shipped is None:
+                raise FileNotFoundError(
+                    f'the shipped eq. 9 fit {shipped_path} is missing and {DATA_FILE_NAME} is not '
+                    'at hand to refit it; set FROG_DATA_DIR to the folder with the frog '
+                    'measurements (shared/data/frog)')
+            shipped.source.update(loaded_from=str(shipped_path), verified=False)
+            return shipped
+        data_file = data_dir / DATA_FILE_NAME
+        digest = file_sha256(data_file)
+        if shipped is not None and shipped.source.get('data_sha256') == digest:
+            shipped.source.update(loaded_from=str(shipped_path), verified=True)
+            return shipped
+        if shipped is not None:
+            warnings.warn(f'{data_file} (sha256 {digest[:12]}) differs from the data of the shipped '
+                          f'eq. 9 fit (sha256 {str(shipped.source.get("data_sha256"))[:12]}); using a '
+                          'refit of the measurements. Regenerate the shipped fit with '
+                          '`frog-sim fit --write-package-data`.', StaleFitWarning, stacklevel=2)
+        return cls.fit_file(data_file, use_cache=use_cache)
+
+    @classmethod
+    def fit_file(cls, path: Path | str, use_cache: bool = True) -> 'ActuationLibrary':
+        """Fit eq. 9 to every profile of one CSV (cached in :func:`cache_dir` by sha256)."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f'{path} not found (measured limb curvature profiles)')
+        digest = file_sha256(path)
+        cache_file = cache_dir() / f'actuation_fit_v{FIT_VERSION}_{digest[:16]}.json' if use_cache else None
+        if cache_file is not None and cache_file.is_file():
             try:
                 lib = cls._from_json(json.loads(cache_file.read_text()))
-                lib.source['cache_file'] = str(cache_file)
+                lib.source.update(loaded_from=str(cache_file), verified=True)
                 return lib
-            except (ValueError, KeyError):
+            except (ValueError, KeyError, TypeError):
                 pass  # corrupt cache: refit
         data = read_curvature_profiles(path)
         profiles = {key: fit_profile(t, k, *key) for key, (t, k) in sorted(data.items())}
-        source = {'data_file': str(path), 'data_sha1': digest, 'fit_version': FIT_VERSION,
+        source = {'data_file': path.name, 'data_sha256': digest, 'fit_version': FIT_VERSION,
+                  'code_version': code_version(),
                   'created_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
                   'model': 'paper eq. 9 piecewise logistic, curve_fit per phase',
                   'units': {'coefficients': 'C1,C4 [1/m]; C2 [1/s]; C3 [s]',
                             'switch_time': 's', 'cycle_time': 's', 'rms_error': '1/m'}}
         lib = cls(profiles, source)
-        if use_cache:
-            tmp = cache_file.with_suffix('.tmp')
-            tmp.write_text(json.dumps(lib._to_json(), indent=1))
-            tmp.replace(cache_file)
-            lib.source['cache_file'] = str(cache_file)
+        if cache_file is not None:
+            lib.write_json(cache_file)
+        lib.source.update(loaded_from=str(path), verified=True)
         return lib
 
+    def write_json(self, path: Path | str) -> Path:
+        """Write the fit as JSON (atomically); run-time keys of ``source`` are dropped."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        obj = self._to_json()
+        for key in ('loaded_from', 'verified', 'cache_file'):
+            obj['source'].pop(key, None)
+        tmp = path.with_suffix('.tmp')
+        tmp.write_text(json.dumps(obj, indent=1) + '\n')
+        tmp.replace(path)
+        return path
+
     def _to_json(self) -> dict:
-        return {'source': self.source, 'profiles': [
+        return {'source': dict(self.source), 'profiles': [
             {'egain_vol_pct': p.egain_vol_pct, 'frequency_hz': p.frequency_hz,
              'coefficients': list(p.coefficients), 'switch_time': p.switch_time,
              'cycle_time': p.cycle_time, 'rms_error': p.rms_error}
@@ -233,7 +370,9 @@ class ActuationLibrary:
             prof = CurvatureProfile(p['egain_vol_pct'], p['frequency_hz'], tuple(p['coefficients']),
                                     p['switch_time'], p['cycle_time'], p['rms_error'])
             profiles[(round(prof.egain_vol_pct, 1), round(prof.frequency_hz, 1))] = prof
-        return cls(profiles, obj['source'])
+        if not profiles:
+            raise ValueError('no profiles')
+        return cls(profiles, dict(obj['source']))
 
     def frequencies(self, egain_vol_pct: float) -> list[float]:
         """Measured frequencies [Hz] for one EGaIn fraction."""

@@ -20,7 +20,7 @@ reference.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 
@@ -42,37 +42,62 @@ class FrogParameters:
     """
 
     # --- geometry (paper Fig. 2b; see module docstring) ---
-    body_side_length: float = 0.090          # L_o [m]
-    limb_length: float = 0.035               # L_i [m]
-    front_dimension_hf: float = 0.035        # H_f [m] (reference only)
-    aft_dimension_ha: float = 0.024          # H_a [m] (reference only)
-    body_edges_per_side: int = 23            # dl = L_o / 23 = 3.91 mm -> 128 nodes
+    # L_o [m]
+    body_side_length: float = field(default=0.090, metadata={'range': (0.03, 0.3), 'unit': 'm'})
+    # L_i [m]
+    limb_length: float = field(default=0.035, metadata={'range': (0.01, 0.1), 'unit': 'm'})
+    # H_f [m] (reference only)
+    front_dimension_hf: float = field(default=0.035, metadata={'range': (0.005, 0.1), 'unit': 'm'})
+    # H_a [m] (reference only)
+    aft_dimension_ha: float = field(default=0.024, metadata={'range': (0.005, 0.1), 'unit': 'm'})
+    # dl = L_o / 23 = 3.91 mm -> 128 nodes
+    body_edges_per_side: int = field(default=23, metadata={'range': (2, 400), 'unit': '-'})
     # --- limbs ---
-    limb_radius: float = 0.002               # authors' code: rod radius ~2 mm
-    limb_young_relaxed: float = 3.0e6        # E_0 [Pa] (paper)
-    limb_young_heated: float = 8.04e6        # E_max [Pa] (paper; x2.68 while SMA is heated)
-    egain_vol_pct: float = 10.0              # EGaIn volume % of the interface layer
-    interface_layer_fraction: float = 1.0 / 3.0  # share of limb volume that is the LMEE layer
-    silicone_density: float = SILICONE_DENSITY
-    egain_density: float = EGAIN_DENSITY
+    # authors' code: rod radius ~2 mm
+    limb_radius: float = field(default=0.002, metadata={'range': (0.0005, 0.01), 'unit': 'm'})
+    # E_0 [Pa] (paper)
+    limb_young_relaxed: float = field(default=3.0e6, metadata={'range': (1.0e5, 1.0e8), 'unit': 'Pa'})
+    # E_max [Pa] (paper; x2.68 while SMA is heated)
+    limb_young_heated: float = field(default=8.04e6, metadata={'range': (1.0e5, 1.0e8), 'unit': 'Pa'})
+    # EGaIn volume % of the interface layer
+    egain_vol_pct: float = field(default=10.0, metadata={'range': (0.0, 100.0), 'unit': '%'})
+    # share of limb volume that is the LMEE layer
+    interface_layer_fraction: float = field(default=1.0 / 3.0, metadata={'range': (0.01, 1.0), 'unit': '-'})
+    silicone_density: float = field(default=SILICONE_DENSITY, metadata={'range': (900.0, 1300.0), 'unit': 'kg/m^3'})
+    egain_density: float = field(default=EGAIN_DENSITY, metadata={'range': (6000.0, 6500.0), 'unit': 'kg/m^3'})
     # --- body ---
-    body_mass: float = 0.150                 # [kg] four 3S 300 mAh LiPo (~28 g each) + PCB + foam + silicone
-    body_height: float = 0.022               # [m] z-extent: neutrally buoyant 150 g over (90^2-35^2) mm^2
-    body_young_equivalent: float = 26.0e6    # [Pa] effective; "four elastic rods with high stiffness"
-    body_section_width: float = 0.0275       # [m] in-plane frame width (90 - 35) / 2 mm
-    body_rod_diameter: float = 0.004         # [m] D of the body rods in eq. 1, 3 (as the limbs)
+    # [kg] four 3S 300 mAh LiPo (~28 g each) + PCB + foam + silicone
+    body_mass: float = field(default=0.150, metadata={'range': (0.02, 1.0), 'unit': 'kg'})
+    # [m] z-extent: neutrally buoyant 150 g over (90^2-35^2) mm^2
+    body_height: float = field(default=0.022, metadata={'range': (0.005, 0.1), 'unit': 'm'})
+    # [Pa] effective; "four elastic rods with high stiffness"
+    body_young_equivalent: float = field(default=26.0e6, metadata={'range': (1.0e6, 1.0e11), 'unit': 'Pa'})
+    # [m] in-plane frame width (90 - 35) / 2 mm
+    body_section_width: float = field(default=0.0275, metadata={'range': (0.002, 0.1), 'unit': 'm'})
+    # [m] D of the body rods in eq. 1, 3 (as the limbs)
+    body_rod_diameter: float = field(default=0.004, metadata={'range': (0.001, 0.1), 'unit': 'm'})
     # --- fluid (paper, Hydrodynamic Characterization) ---
-    fluid_density: float = WATER_DENSITY     # rho_f
-    limb_drag_normal: float = 1.0            # C_ln
-    limb_drag_tangent: float = 0.01          # C_lt
-    body_drag_normal: float = 0.8            # C_bn (calibrated by the authors)
-    body_drag_tangent: float = 0.008         # C_bt
-    added_mass_coefficient: float = 1.0      # C_a (theoretical value)
+    # rho_f
+    fluid_density: float = field(default=WATER_DENSITY, metadata={'range': (900.0, 1100.0), 'unit': 'kg/m^3'})
+    # C_ln
+    limb_drag_normal: float = field(default=1.0, metadata={'range': (0.0, 5.0), 'unit': '-'})
+    # C_lt
+    limb_drag_tangent: float = field(default=0.01, metadata={'range': (0.0, 1.0), 'unit': '-'})
+    # C_bn (calibrated by the authors)
+    body_drag_normal: float = field(default=0.8, metadata={'range': (0.0, 5.0), 'unit': '-'})
+    # C_bt
+    body_drag_tangent: float = field(default=0.008, metadata={'range': (0.0, 1.0), 'unit': '-'})
+    # C_a (theoretical value)
+    added_mass_coefficient: float = field(default=1.0, metadata={'range': (0.0, 3.0), 'unit': '-'})
     # --- actuation ---
-    pulse_duration: float = 0.080            # hardware pulse [s] (DESIGN.md; paper 70 ms)
-    primitive_period: float = 1.5            # one primitive per 1.5 s (DESIGN.md)
-    limb_curl_direction: str = 'backward'    # sense of the relaxed curl (see frog_model)
-    limb_root_angle_deg: float = -75.0       # limb root direction: 0 lateral, -90 aft, +90 forward
+    # hardware pulse [s] (DESIGN.md; paper 70 ms)
+    pulse_duration: float = field(default=0.080, metadata={'range': (0.01, 0.5), 'unit': 's'})
+    # one primitive per 1.5 s (DESIGN.md)
+    primitive_period: float = field(default=1.5, metadata={'range': (0.2, 10.0), 'unit': 's'})
+    # sense of the relaxed curl (see frog_model)
+    limb_curl_direction: str = field(default='backward', metadata={'choices': ('forward', 'backward'), 'unit': '-'})
+    # limb root direction: 0 lateral, -90 aft, +90 forward
+    limb_root_angle_deg: float = field(default=-75.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
 
     def replace(self, **changes) -> 'FrogParameters':
         """Return a copy with some fields changed (validated)."""
@@ -81,7 +106,13 @@ class FrogParameters:
         return new
 
     def validate(self) -> None:
-        """Raise ``ValueError`` naming the first non-physical value."""
+        """Raise ``ValueError`` naming the first non-physical value (incl. outside its range)."""
+        for f in fields(self):
+            lo_hi = f.metadata.get('range')
+            value = getattr(self, f.name)
+            if lo_hi is not None and not lo_hi[0] <= value <= lo_hi[1]:
+                raise ValueError(f'{f.name} = {value!r} {f.metadata["unit"]} is outside its plausible range '
+                                 f'{lo_hi[0]:g} - {lo_hi[1]:g} {f.metadata["unit"]}')
         positive = ['body_side_length', 'limb_length', 'limb_radius', 'limb_young_relaxed',
                     'body_rod_diameter',
                     'limb_young_heated', 'body_mass', 'body_height', 'body_young_equivalent',
@@ -197,6 +228,56 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
 }
 
 
+def _field(name: str):
+    for f in fields(FrogParameters):
+        if f.name == name:
+            return f
+    known = [f.name for f in fields(FrogParameters)]
+    import difflib
+    close = difflib.get_close_matches(name, known, n=1)
+    hint = f"; did you mean {close[0]!r}?" if close else ''
+    raise KeyError(f'{name!r} is not a FrogParameters field{hint}')
+
+
+def parameter_range(name: str) -> tuple[float, float] | None:
+    """Physically plausible ``(lo, hi)`` of a numeric field (``None`` for a choice field).
+
+    Raises
+    ------
+    KeyError
+        If ``name`` is not a field (the message suggests the closest name).
+
+    Examples
+    --------
+    >>> parameter_range('body_mass')
+    (0.02, 1.0)
+    """
+    return _field(name).metadata.get('range')
+
+
+def parameter_unit(name: str) -> str:
+    """SI unit of a field (``'-'`` for dimensionless)."""
+    return _field(name).metadata['unit']
+
+
+def parameter_specs() -> list[dict]:
+    """One dict per field: ``name, default, type, unit, range`` (or ``choices``), ``source``.
+
+    This is the single table from which ROS parameter descriptors (``model.*``) and the
+    validation are built.
+    """
+    out = []
+    for f in fields(FrogParameters):
+        spec = {'name': f.name, 'default': getattr(DEFAULT_PARAMETERS, f.name), 'type': f.type,
+                'unit': f.metadata['unit'], 'source': PARAMETER_SOURCES[f.name][1]}
+        if 'range' in f.metadata:
+            spec['range'] = f.metadata['range']
+        if 'choices' in f.metadata:
+            spec['choices'] = f.metadata['choices']
+        out.append(spec)
+    return out
+
+
 def parameter_table(params: FrogParameters | None = None) -> list[tuple[str, object, str, str]]:
     """Rows ``(name, value, unit, source)`` for every parameter, plus derived values.
 
@@ -229,4 +310,5 @@ DEFAULT_PARAMETERS = FrogParameters()
 DEFAULT_PARAMETERS.validate()
 
 __all__ = ['FrogParameters', 'PARAMETER_SOURCES', 'parameter_table', 'DEFAULT_PARAMETERS',
+           'parameter_range', 'parameter_unit', 'parameter_specs',
            'WATER_DENSITY', 'EGAIN_DENSITY', 'SILICONE_DENSITY']
