@@ -15,6 +15,7 @@ import numpy as np
 
 from frog_vision.core.camera_model import CameraModel
 from frog_vision.core.detection import TAG_CORNERS_UNIT, Detection
+from frog_vision.core.robot_shape import COM_BEHIND_RING_CENTRE
 from frog_vision.core.tank_calibration import CameraPose
 
 
@@ -30,7 +31,8 @@ class PoseSettings:
         Height of the tag face above the tank plane z = 0 of the board [m].
     offset_x, offset_y, offset_yaw : float
         Pose of the body frame in the tag frame [m, m, rad] (tag frame: x = printed tag's
-        right, y = its top).
+        right, y = its top). Default: the tag on the body's centre, aligned with it; the
+        body frame's origin at the centre of mass, 0.26 mm behind (``robot_shape``).
     corner_sigma_px : float
         Corner noise used for the covariance [px]; the fit's own residual is used when larger.
     border_margin_px : float
@@ -42,7 +44,7 @@ class PoseSettings:
 
     tag_size: float = 0.047
     tag_height: float = 0.0
-    offset_x: float = 0.0
+    offset_x: float = -COM_BEHIND_RING_CENTRE
     offset_y: float = 0.0
     offset_yaw: float = 0.0
     corner_sigma_px: float = 0.2

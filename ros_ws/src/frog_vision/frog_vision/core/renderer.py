@@ -317,8 +317,12 @@ class TankRenderer:
         uv = np.round(self._project(self._H0, pts) * 16).astype(np.int32)
         cv2.fillPoly(frame, [uv], (40, 45, 50), cv2.LINE_AA, 4)
 
-    def project_tag_corners(self, pose, tag_offset=(0.0, 0.0, 0.0)) -> np.ndarray:
-        """Exact pixel positions (distorted image) of the tag's detected corners (4, 2)."""
+    def project_tag_corners(self, pose, tag_offset=None) -> np.ndarray:
+        """Exact pixel positions (distorted image) of the tag's detected corners (4, 2)
+        (``tag_offset`` as in :meth:`render`; default: the default outline's ring centre)."""
+        if tag_offset is None:
+            c = self._default_shape.ring_centre
+            tag_offset = (float(c[0]), float(c[1]), 0.0)
         from frog_vision.core.detection import TAG_CORNERS_UNIT
         from frog_vision.core.pose import compose_offset
         tp, _ = compose_offset(pose, tag_offset)
