@@ -7,9 +7,10 @@ lateral and yaw-rate velocities. It is driven by white acceleration noise: per a
 step dt, ``Q = q [[dt^3/3, dt^2/2], [dt^2/2, dt]]`` with the spectral densities
 ``accel_noise`` [(m/s^2)^2/Hz] and ``yaw_accel_noise`` [(rad/s^2)^2/Hz] (Bar-Shalom,
 "Estimation with Applications to Tracking", sec. 6.2.2).
-The defaults were tuned on rendered sequences of the frog's strokes (a kick adds ~4 cm/s
-within ~0.1 s, turning kicks ~25 deg/s; ``bench/vision_accuracy.py``) with the authors'
-level of pose noise: smaller values smooth more but lag more behind a kick.
+The defaults were tuned on rendered sequences of frog_sim's simulated frog executing
+primitives, with the authors' level of pose noise (``bench/vision_accuracy.py``): smaller
+values smooth more but lag more behind a stroke. For faster manoeuvres (the synthetic
+sequences' 20 deg/s turning strokes) a larger ``yaw_accel_noise`` (0.1) is better.
 
 Heading measurements are unwrapped against the prediction; measurements further than a
 chi-square gate from the prediction are rejected as outliers (a wrong quad, a tag half out
@@ -32,8 +33,8 @@ CHI2_3DOF_999 = 16.27
 class FilterSettings:
     """Settings of :class:`PoseFilter` (see the module docstring)."""
 
-    accel_noise: float = 0.0005
-    yaw_accel_noise: float = 0.1
+    accel_noise: float = 3e-5
+    yaw_accel_noise: float = 0.01
     gate_chi2: float = CHI2_3DOF_999
     gate_floor_m: float = 0.003        # never gate closer than this (position) [m]
     gate_floor_rad: float = 0.05       # ... and this (heading) [rad]

@@ -1,9 +1,12 @@
 """Synthetic swimming for rendered test sequences (no simulator needed).
 
-Body velocities follow the frog's strokes: one primitive every ``period`` seconds, each a
-kick that raises the forward speed by ``kick_speed`` within ~0.15 s and lets it decay
-with the drag time constant (paper's calibration runs: 2-3 cm/s mean speed), and turning
-strokes that add a yaw-rate pulse of up to ``turn_rate``. The limbs curl during a kick.
+Body velocities follow the frog's strokes as frog_sim's simulator produces them (measured
+on its response to primitives: the front pair, then the rear pair 80 ms later, each raise
+the forward speed by ~1 cm/s within ~0.1 s, peak acceleration ~0.1 m/s^2, and the speed
+decays with a ~1.5 s drag time constant, so successive strokes build up 2-4 cm/s as in the
+paper's calibration runs). Every second stroke is a turning one that adds a yaw-rate pulse
+of up to ``turn_rate`` (the authors' library spans +-30 deg/s). The limbs curl during a
+kick.
 Poses are integrated exactly from the body twist at a fine step and sampled at the
 camera's capture times.
 """
@@ -39,7 +42,7 @@ class Trajectory:
 
 
 def swim_and_turn(duration: float = 10.0, fps: float = 30.0, start=(-0.05, -0.15, 0.6),
-                  period: float = 1.5, kick_speed: float = 0.04, turn_rate: float = np.radians(30),
+                  period: float = 1.5, kick_speed: float = 0.02, turn_rate: float = np.radians(20),
                   seed: int = 0) -> Trajectory:
     """A frog swimming forward and turning left and right (see the module docstring)."""
     rng = np.random.default_rng(seed)
@@ -50,19 +53,24 @@ def swim_and_turn(duration: float = 10.0, fps: float = 30.0, start=(-0.05, -0.15
     lat = np.zeros(n)
     yaw = np.zeros(n)
     curl = np.zeros(n)
-    tau_rise, tau_decay = 0.06, 0.9
+    tau_rise, tau_decay = 0.05, 1.5
+
+    def pulse(t0):
+        s = np.clip(tt - t0, 0, None)
+        return np.where(tt >= t0, np.exp(-s / tau_decay) - np.exp(-s / tau_rise), 0) / 0.91   # peak ~1
+
     for k, t0 in enumerate(np.arange(0.3, duration, period)):
-        s = tt - t0
-        on = s >= 0
-        pulse = np.where(on, np.exp(-np.clip(s, 0, None) / tau_decay) - np.exp(-np.clip(s, 0, None) / tau_rise), 0)
-        pulse /= 0.88                       # peak of the double exponential ~ 1
         kind = k % 4                         # forward, left, forward, right
-        amp = kick_speed * rng.uniform(0.7, 1.1)
-        fwd += amp * pulse
-        lat += 0.1 * amp * pulse * rng.uniform(-1, 1)
+        amp = kick_speed * rng.uniform(0.8, 1.2)
+        both = 0.5 * (pulse(t0) + pulse(t0 + 0.08))      # front pair, rear pair one pulse later
+        fwd += amp * both
+        lat += 0.1 * amp * both * rng.uniform(-1, 1)
         if kind in (1, 3):
-            yaw += (1 if kind == 1 else -1) * turn_rate * rng.uniform(0.6, 1.0) * pulse
-        curl += np.where(on & (s < 0.3), 40.0 * np.sin(np.pi * np.clip(s, 0, 0.3) / 0.3), 0)
+            turn = np.clip(tt - t0, 0, None)
+            shape = np.where(tt >= t0, np.exp(-turn / 0.6) - np.exp(-turn / 0.12), 0) / 0.56
+            yaw += (1 if kind == 1 else -1) * turn_rate * rng.uniform(0.6, 1.0) * shape
+        s = tt - t0
+        curl += np.where((s >= 0) & (s < 0.3), 40.0 * np.sin(np.pi * np.clip(s, 0, 0.3) / 0.3), 0)
     pose = np.zeros((n, 3))
     pose[0] = start
     for i in range(1, n):
