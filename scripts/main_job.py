@@ -63,7 +63,7 @@ def ensure_library(path: Path, states: int) -> Path:
 def start_graph(args, out: Path, domain, planner: bool):
     import numpy as np
 
-    from frog_planner.evaluation import PATHS
+    from frog_twin.core.evaluation import PATHS
     procs = []
     rec = NodeProcess(["recorder", *ros_args({"output_dir": str(out / "recording"),
                                               "file_prefix": "loop", "topics": TOPICS})],
@@ -190,22 +190,13 @@ def read_recording(mcap: Path) -> dict:
             "path": path, "shapes": shapes}
 
 
-def distance_to_polyline(points, path):
-    """Distance [m] of each point to a polyline (independent of the planner's code)."""
-    import numpy as np
-    a, d = path[:-1], np.diff(path, axis=0)
-    p = points[:, None, :]
-    t = np.clip(((p - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0, 1)
-    return np.min(np.linalg.norm(a + t[..., None] * d - p, axis=-1), axis=1)
-
-
 def analyse_closed_loop(mcap: Path, out: Path, args) -> dict:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from frog_planner.evaluation import samples_before_finish
+    from frog_twin.core.metrics import distance_to_polyline, samples_before_finish
     rec = read_recording(mcap)
     odom, status, path = rec["odom"], rec["status"], rec["path"]
     if len(odom) < 10 or path is None:

@@ -3,7 +3,8 @@
 - every Python package has package.xml (format 3, ament_python), setup.cfg installing
   scripts into lib/<pkg>, the ament resource marker, a core/ and a nodes/ subpackage;
 - core modules import neither rclpy nor another package of ours (cores meet only through
-  messages and files), checked statically and by importing them with rclpy blocked;
+  messages and files; the composition package frog_twin is the one exception), checked
+  statically and by importing them with rclpy blocked;
 - every console script is installed where `ros2 run` looks and its function exists;
 - every ROS package or third-party library a package's code imports is in its package.xml
   (a rosdep key, or a ``pip-only`` comment naming it where rosdep has none).
@@ -23,6 +24,7 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "ros_ws" / "src"
 INSTALL = SRC.parent / "install"
 COMMON = "soft_robot_common"   # node plumbing shared by all nodes; no core, no algorithms
+COMPOSITION = "frog_twin"      # the one package whose core may use other packages' cores
 ALL_PY = sorted(p.name for p in SRC.iterdir() if (p / "setup.py").is_file())
 PY_PACKAGES = [p for p in ALL_PY if p != COMMON]
 OURS = set(ALL_PY) | {"soft_robot_interfaces"}
@@ -30,7 +32,7 @@ OURS = set(ALL_PY) | {"soft_robot_interfaces"}
 
 def test_expected_packages_exist():
     assert set(PY_PACKAGES) == {"frog_sim", "frog_planner", "frog_vision", "frog_bridge",
-                                "softkin_fk", "frog_logger"}
+                                "softkin_fk", "frog_logger", COMPOSITION}
     assert (SRC / "soft_robot_interfaces" / "CMakeLists.txt").is_file()
     assert (SRC / COMMON / "setup.py").is_file()
 
@@ -78,7 +80,7 @@ def test_core_imports_no_ros_and_no_other_package(pkg):
         names = _imports(path)
         ros = {n for n in names if n in ("rclpy", "rosidl_runtime_py", "rosbag2_py")
                or n.endswith("_msgs") or n.endswith("_srvs")}
-        others = (names & OURS) - {pkg}
+        others = (names & OURS) - {pkg} if pkg != COMPOSITION else set()
         if ros or others:
             bad[str(path.relative_to(SRC))] = sorted(ros | others)
     assert not bad, f"core modules importing ROS or another package's code: {bad}"
@@ -163,3 +165,14 @@ def test_manifest_check_catches_a_missing_dependency():
     assert "rclpy" in _missing_dependencies("frog_sim", keys - {"rclpy"}, pip_only)
     keys, pip_only = _manifest("frog_logger")
     assert "mcap" in _missing_dependencies("frog_logger", keys, "")
+
+
+@pytest.mark.parametrize("pkg", [p for p in PY_PACKAGES if p != COMPOSITION])
+def test_no_package_but_the_composition_imports_another_packages_code(pkg):
+    """Nodes, tools and cores of a package stand alone (they meet through messages and files)."""
+    bad = {}
+    for path in (SRC / pkg / pkg).rglob("*.py"):
+        others = (_imports(path) & (OURS - {"soft_robot_interfaces", COMMON})) - {pkg}
+        if others:
+            bad[str(path.relative_to(SRC))] = sorted(others)
+    assert not bad, f"imports of another package's code outside {COMPOSITION}: {bad}"

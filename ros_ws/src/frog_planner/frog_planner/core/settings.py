@@ -34,7 +34,7 @@ def _setting(default, description, range=(None, None), unit="", live=False, choi
 class PlannerSettings:
     """How the planner decides (seed 000, Algorithm 1 and eq. 19, plus this project's options)."""
 
-    period: float = _setting(1.5, "primitive period T (a multiple of the library's sample interval)",
+    period: float = _setting(1.5, "primitive period T (between library samples, transitions are interpolated)",
                              (0.05, 10.0), "s")
     depth: int = _setting(1, "tree search depth H (the paper found 1 best on hardware)", (1, MAX_DEPTH),
                           live=True)

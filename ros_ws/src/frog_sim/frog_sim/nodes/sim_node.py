@@ -20,7 +20,7 @@ import time
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point
+from geometry_msgs.msg import Point, TransformStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -41,10 +41,14 @@ _NODE_PARAMS = [
     Param("time_step", DEFAULT_TIME_STEP, "integrator time step dt [s]", min=1e-5, max=0.01),
     Param("odom_rate_hz", 50.0, "rate of frog/sim/odom in simulated time [Hz]", min=0.1, max=1000.0),
     Param("shape_rate_hz", 10.0, "rate of frog/sim/shape in simulated time [Hz]", min=0.1, max=200.0),
+    Param("execute_primitives", True, "execute frog/primitive directly; false when a robot (emulator) fires the "
+          "limbs through frog/limb_activation, as in the digital twin"),
     Param("odom_alias_topic", "", "also publish the ground truth here (e.g. frog/odom for a vision-free "
           "loop); empty = off"),
     Param("world_frame", "tank", "frame of poses (REP-105 world/odom frame)"),
-    Param("body_frame", "frog", "robot body frame, x forward"),
+    Param("body_frame", "frog", "robot body frame of the odometry's twist, x forward"),
+    Param("publish_tf", True, "publish the true pose on tf as world_frame -> tf_frame (with the odometry)"),
+    Param("tf_frame", "frog_true", "child frame of the true pose on tf (the tracker publishes world -> frog)"),
     Param("initial_x", 0.0, "initial centre-of-mass x [m]", min=-1e3, max=1e3),
     Param("initial_y", 0.0, "initial centre-of-mass y [m]", min=-1e3, max=1e3),
     Param("initial_heading", 0.0, "initial heading [rad]", min=-2 * math.pi, max=2 * math.pi),
@@ -109,8 +113,19 @@ class SimNode(Node):
         # /clock is global by ROS convention (use_sim_time nodes listen there)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10) if p["publish_clock"] else None
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.tf_pub = None
+        if p["publish_tf"]:
+            try:
+                from tf2_msgs.msg import TFMessage
+            except ImportError:
+                self.get_logger().warning("tf2_msgs is not installed: not publishing tf (build the workspace "
+                                          "with ./dev, which provides it, or install ros-jazzy-tf2-msgs)")
+            else:
+                self._TFMessage = TFMessage
+                self.tf_pub = self.create_publisher(TFMessage, "tf", 100)
         from soft_robot_interfaces.msg import LimbActivation, Primitive
-        self.create_subscription(Primitive, "frog/primitive", self.on_primitive, qos)
+        if p["execute_primitives"]:
+            self.create_subscription(Primitive, "frog/primitive", self.on_primitive, qos)
         self.create_subscription(LimbActivation, "frog/limb_activation", self.on_activation, qos)
         self.create_service(Trigger, "~/reset", self.on_reset)
 
@@ -208,6 +223,14 @@ class SimNode(Node):
         self.odom_pub.publish(msg)
         if self.alias_pub is not None:
             self.alias_pub.publish(msg)
+        if self.tf_pub is not None:
+            tf = TransformStamped()
+            tf.header = msg.header
+            tf.child_frame_id = self.cfg["tf_frame"]
+            tf.transform.translation.x = msg.pose.pose.position.x
+            tf.transform.translation.y = msg.pose.pose.position.y
+            tf.transform.rotation = msg.pose.pose.orientation
+            self.tf_pub.publish(self._TFMessage(transforms=[tf]))
 
     def publish_shape(self) -> None:
         pos = self.sim.node_positions
@@ -254,7 +277,8 @@ class SimNode(Node):
 
     def on_reset(self, request, response):
         p = self.cfg
-        self.world_time_offset += self.sim.time
+        # the reset state is one step after the last state published: stamps strictly increase
+        self.world_time_offset += self.sim.time + self.sim.time_step
         self.sim.reset()
         self.sim.set_pose(p["initial_x"], p["initial_y"], p["initial_heading"])
         if p["gait_frequency_hz"] > 0:

@@ -29,7 +29,7 @@ def _run(args, path_name, depth, metric, model_cache):
     import dataclasses
 
     from frog_planner.core.transition_model import TransitionModel
-    from frog_planner.evaluation import PATHS, run_closed_loop, save_result
+    from frog_twin.core.evaluation import PATHS, run_closed_loop, save_result
     settings = dataclasses.replace(args.settings, depth=depth, metric=metric)
     key = (metric, settings.k_neighbours)
     if key not in model_cache:
@@ -89,11 +89,11 @@ def main(argv=None) -> int:
     except (LibraryFormatError, ValueError, OSError) as exc:
         print(f"frog-planner-eval: error: {exc}", file=sys.stderr)
         return 2
-    from frog_planner.evaluation import PATHS, path_min_radius
+    from frog_twin.core.evaluation import PATHS, path_min_radius
     for r in results:
         r["path_min_radius_m"] = path_min_radius(PATHS[{"sinusoid": "sine"}.get(r["path"], r["path"])]())
     if args.turning:
-        from frog_planner.evaluation import turning_response
+        from frog_twin.core.evaluation import turning_response
         print("\nturning response, each primitive repeated every period from rest for 45 s:")
         print(f"  {'prim':4s} {'steady COM circle cm':>20} {'speed cm/s':>10} {'yaw deg/s':>9} "
               f"{'63% yaw after s':>15} {'max side-slip deg':>17}")
