@@ -5,7 +5,8 @@ Frames: a rendered swimming-and-turning sequence (camera_sim defaults, noise 5).
 the same frames in the same run:
 
 - ``Tracker.process`` (ours: search window around the prediction, full-image search when
-  it fails; decimate 1, edge refinement, 1 thread) = detection + pose + covariance + filter;
+  it fails; decimate 2, edge refinement on the full image, 1 thread) = detection + pose +
+  covariance + filter;
 - our detector on the whole image (no window);
 - pupil-apriltags with its default settings (quad_decimate 2, 1 thread) on the whole image;
 - on the same motion rendered with a tag36h11 tag (OpenCV has no tagStandard41h12): ours,

@@ -16,6 +16,7 @@ EXAMPLES = """examples:
   # a simulated trajectory (or the built-in swim) -> video + exact ground truth
   frog-vision render --demo swim --duration 10 -o runs/render_swim
   frog-vision render --trajectory traj.csv -o runs/render_traj --noise 5 --jitter 0.2
+  frog-log export rec.mcap -o csv/ && frog-vision render --trajectory csv/frog__sim__odom.csv -o runs/render_rec
   # and back: track the rendered video with the files render wrote
   frog-vision track runs/render_swim/frames.mp4 --camera-info runs/render_swim/camera_info.yaml \\
       --tank-calibration runs/render_swim/tank_calibration.yaml -o runs/render_swim/track.csv
@@ -204,6 +205,8 @@ def _read_trajectory(path: Path, fps: float):
             reader = csv.DictReader(f)
             rows = list(reader)
             cols = reader.fieldnames or []
+        if "pose.pose.position.x" in cols:          # frog-log export of a nav_msgs/Odometry topic
+            rows, cols = [_odometry_row(r) for r in rows], ["t", "x", "y", "heading", "forward", "lateral", "yaw_rate"]
         for c in ("t", "x", "y", "heading"):
             if c not in cols:
                 raise UsageError(f"--trajectory {path}: column {c!r} is missing (need t, x, y, heading; optional "
@@ -225,6 +228,15 @@ def _read_trajectory(path: Path, fps: float):
         c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
         twist = np.column_stack([c * g[:, 0] + s * g[:, 1], -s * g[:, 0] + c * g[:, 1], g[:, 2]])
     return Trajectory(t, pose, twist, np.zeros(len(t)))
+
+
+def _odometry_row(r: dict) -> dict:
+    """t, x, y, heading and the body twist from a flattened nav_msgs/Odometry row."""
+    qz, qw = float(r["pose.pose.orientation.z"]), float(r["pose.pose.orientation.w"])
+    return {"t": int(r["header.stamp.sec"]) + int(r["header.stamp.nanosec"]) * 1e-9,
+            "x": r["pose.pose.position.x"], "y": r["pose.pose.position.y"], "heading": 2 * np.arctan2(qz, qw),
+            "forward": r["twist.twist.linear.x"], "lateral": r["twist.twist.linear.y"],
+            "yaw_rate": r["twist.twist.angular.z"]}
 
 
 def cmd_render(a) -> int:
@@ -294,7 +306,8 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="simulated trajectory -> video + ground-truth CSV",
                        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = r.add_mutually_exclusive_group()
-    g.add_argument("--trajectory", help="CSV with t, x, y, heading [, forward, lateral, yaw_rate] (SI)")
+    g.add_argument("--trajectory", help="CSV with t, x, y, heading [, forward, lateral, yaw_rate] (SI), or "
+                   "'frog-log export' of a recorded frog/sim/odom (nav_msgs/Odometry)")
     g.add_argument("--demo", choices=("swim",), default="swim", help="built-in swimming-and-turning trajectory")
     r.add_argument("--duration", type=float, default=10.0, help="[s] of the demo")
     r.add_argument("--fps", type=float, default=30.0)

@@ -85,3 +85,24 @@ def test_help_has_examples(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])
     assert "examples:" in capsys.readouterr().out
+
+
+def test_render_a_recorded_odometry_export(tmp_path):
+    # the columns 'frog-log export' writes for nav_msgs/Odometry (flattened field names)
+    p = tmp_path / "frog__sim__odom.csv"
+    lines = ["log_time_ns,header.stamp.sec,header.stamp.nanosec,header.frame_id,child_frame_id,"
+             "pose.pose.position.x,pose.pose.position.y,pose.pose.position.z,pose.pose.orientation.x,"
+             "pose.pose.orientation.y,pose.pose.orientation.z,pose.pose.orientation.w,"
+             "twist.twist.linear.x,twist.twist.linear.y,twist.twist.angular.z"]
+    for k in range(51):
+        t = k * 0.02
+        h = 0.3 + 0.2 * t
+        lines.append(f"0,{int(t)},{int(round((t % 1) * 1e9))},tank,frog,{0.02 * t},{0.01},0,0,0,"
+                     f"{np.sin(h / 2)},{np.cos(h / 2)},0.02,0,0.2")
+    p.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "o"
+    assert main(["render", "--trajectory", str(p), "-o", str(out)]) == 0
+    truth = _rows(out / "ground_truth.csv")
+    assert len(truth) == 30
+    assert float(truth[15]["heading"]) == pytest.approx(0.3 + 0.2 * 0.5, abs=1e-6)
+    assert float(truth[15]["forward"]) == pytest.approx(0.02)

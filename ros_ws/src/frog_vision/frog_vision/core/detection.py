@@ -68,7 +68,7 @@ class DetectorSettings:
 
     family: str = "tagStandard41h12"
     tag_ids: tuple = (47,)
-    decimate: float = 1.0
+    decimate: float = 2.0
     threads: int = 1
     refine_edges: bool = True
     sigma: float = 0.0
