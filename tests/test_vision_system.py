@@ -205,3 +205,32 @@ def test_camera_node_publishes_a_video_file(launch, probe, tmp_path):
     stamps = [_t(i.header.stamp) for i in images]
     assert all(b > a for a, b in zip(stamps, stamps[1:]))
     assert cam.stop() == 0
+
+
+def test_real_camera_chain_on_a_video_file(launch, probe, tmp_path):
+    """camera_node (a video file, its calibration YAML) -> tracker_node (tank calibration
+    YAML) -> odometry of a robot swimming straight at 2 cm/s."""
+    from frog_vision.core.camera_model import CameraModel
+    from frog_vision.core.renderer import RenderSettings, TankRenderer
+    from frog_vision.core.tank_calibration import CameraPose, TankCalibration
+    cam = CameraModel(640, 480, [[610.0, 0, 318.0], [0, 611.0, 242.0], [0, 0, 1]], [-0.1, 0.04, 0, 0, 0])
+    pose = CameraPose.overhead(0.8, tilt_x=np.radians(1.0))
+    cam.to_yaml(tmp_path / "cam.yaml")
+    TankCalibration(pose, 0.0, 0.0, 0, (), (640, 480)).to_yaml(tmp_path / "tank.yaml")
+    r = TankRenderer(cam, pose, RenderSettings(noise_sigma=2.0))
+    path = tmp_path / "swim.avi"
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, (640, 480))
+    truth = [np.array([-0.1 + 0.02 * i / 30, 0.05, 0.0]) for i in range(150)]
+    for p in truth:
+        w.write(r.render(p, (0.02, 0.0, 0.0)))
+    w.release()
+    est = []
+    probe.node.create_subscription(Odometry, "/frog/odom", est.append, QOS)
+    launch("camera_node", params={"source": str(path), "camera_info_file": str(tmp_path / "cam.yaml")})
+    trk = launch("tracker_node", params={"tank_calibration_file": str(tmp_path / "tank.yaml")})
+    probe.spin_until(lambda: len(est) >= 90, timeout=90, what="90 odometry messages")
+    _, p, v = _odom_arrays(est)
+    assert np.all(np.abs(p[:, 1] - 0.05) < 1e-3) and np.all(np.abs(p[:, 2]) < np.radians(0.5))
+    assert np.all((p[:, 0] > -0.101) & (p[:, 0] < -0.1 + 0.02 * 5 + 1e-3))
+    assert np.median(v[30:, 0]) == pytest.approx(0.02, abs=0.004)
+    assert trk.stop() == 0
