@@ -263,6 +263,15 @@ def test_follow_curve_cancel_and_bad_goals(finger):
     fb = []
     client, handle = _send_goal(probe, FollowCurve.Goal(curve="flame", dry_run=True), fb)
     assert handle.accepted
+    probe.spin_until(lambda: len(fb) >= 2, 30, "feedback")
+    # a streamed target while a trajectory runs is refused (it would fight the trajectory)
+    pub = probe.node.create_publisher(PointStamped, "/finger/target", 10)
+    probe.wait_for_subscriber("/finger/target", timeout=20)
+    m = PointStamped()
+    m.header.frame_id = "finger_base"
+    m.point = Point(x=0.1, y=0.055, z=0.0125)
+    pub.publish(m)
+    proc.wait_for_log("target refused: a follow_curve goal is running", timeout=10)
     probe.spin_until(lambda: len(fb) >= 5, 30, "5 feedbacks")
     cancel = handle.cancel_goal_async()
     res_fut = handle.get_result_async()
@@ -284,3 +293,32 @@ def test_follow_curve_cancel_and_bad_goals(finger):
         assert why in res_fut.result().result.message, res_fut.result().result.message
     assert proc.running()
     assert os.environ["ROS_PYTHON_CHECK_FIELDS"] == "1"
+
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "ros_ws" / "src" / "softkin_fk" / "examples"
+
+
+def test_user_mesh_and_spec(launch, probe):
+    """The node on a user's gmsh model + JSON spec, against the core loading the same files."""
+    from soft_robot_interfaces.action import FollowCurve
+    from soft_robot_interfaces.srv import ForwardKinematics, SolveIk
+    from softkin_fk.core.forward import ForwardSolver
+    from softkin_fk.core.mesh_spec import load_mesh_with_spec
+    msh, spec = EXAMPLES / "finger_mm.msh", EXAMPLES / "finger_mm.json"
+    node = launch("kinematics_node", params=dict(mesh_file=str(msh), spec_file=str(spec), config_samples=0,
+                                                 frame_id="part"))
+    node.wait_for_log("ready in", timeout=120)
+    mesh = load_mesh_with_spec(str(msh), str(spec))
+    act = [0.98, 0.99, 0.98]
+    truth = ForwardSolver(mesh).solve(act, tol=1e-9).marker(mesh, "tip")
+    fk = _client(probe, ForwardKinematics, "/finger/forward_kinematics")
+    res = probe.call(fk, ForwardKinematics.Request(actuation=act), timeout=60)
+    assert res.success and np.linalg.norm(np.array([res.tip.x, res.tip.y, res.tip.z]) - truth) < 1e-6
+    ik = _client(probe, SolveIk, "/finger/solve_ik")
+    r = probe.call(ik, SolveIk.Request(target=Point(x=truth[0], y=truth[1], z=truth[2])), timeout=120)
+    assert r.success and r.residual_error <= LAM, r.message
+    fb = []
+    client, handle = _send_goal(probe, FollowCurve.Goal(curve="L"), fb)
+    res_fut = handle.get_result_async()
+    probe.spin_until(res_fut.done, 30, "aborted result")
+    assert "finger's workspace" in res_fut.result().result.message
