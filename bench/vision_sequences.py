@@ -1,7 +1,7 @@
 """Rendered test sequences of frog_sim's simulated frog (shared by bench/vision_accuracy.py
 and tests/test_vision_accuracy.py; outside any package core, so it may use both cores).
 
-The simulator executes a primitive every 1.5 s (forward strokes and turning strokes); every
+The simulator executes a primitive every 1.5 s (forward and turning strokes); every
 camera frame (30 fps) is rendered from the simulator's exact state: centre-of-mass pose,
 body twist and rod network, with the tag on the body ring's centre.
 """
@@ -14,9 +14,10 @@ from frog_vision.core.renderer import Occluder
 from frog_vision.core.robot_shape import RobotShape, shape_from_segments
 from frog_vision.core.synthetic import Trajectory
 
-#: a forward stroke (B), three turning strokes one way (C: three limbs), a forward stroke and
-#: three the other way (D, C's mirror image)
-DEFAULT_PRIMITIVES = ("B", "C", "C", "C", "B", "D", "D", "D")
+#: a forward stroke (B: all four limbs), three turning strokes one way (E: the two left limbs),
+#: a forward stroke and three the other way (F: the two right limbs); the turns are the
+#: strongest of the simulated primitives (35 deg of heading over 10 s, up to 8 deg/s)
+DEFAULT_PRIMITIVES = ("B", "E", "E", "E", "B", "F", "F", "F")
 
 
 def simulated_sequence(duration=10.0, fps=30.0, primitives=DEFAULT_PRIMITIVES, period=1.5,
