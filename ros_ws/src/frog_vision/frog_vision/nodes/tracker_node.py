@@ -102,6 +102,7 @@ class TrackerNode(Node):
         self.state_name = "waiting for images"
         self.state_changed = False
         self.last_error = ""
+        self._logged_error = None
         # diagnostics every wall second (also on simulated time), and at each state change
         self.create_timer(1.0, self.publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"tracking {p['tag_family']} id {p['tag_id']} ({p['tag_size'] * 1e3:g} mm)")
@@ -129,9 +130,9 @@ class TrackerNode(Node):
                                self.cfg["search_window"])
 
     def _error(self, text: str) -> None:
-        if text != self.last_error:
+        if text != self._logged_error:            # a stream of the same bad frames is logged once
             self.get_logger().error(text)
-        self.last_error = text
+        self._logged_error = self.last_error = text
         self.bad_frames += 1
 
     def on_info(self, msg: CameraInfo) -> None:
@@ -171,6 +172,7 @@ class TrackerNode(Node):
                 self.dropped += int(round(gap / self.period)) - 1
         self.last_stamp = stamp
         self.frames += 1
+        self._logged_error = None                 # a good frame: log the next problem again
         res = self.tracker.process(img, stamp)
         before = self.state_name
         if res.state is not None:
