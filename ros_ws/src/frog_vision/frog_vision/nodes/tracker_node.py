@@ -179,7 +179,8 @@ class TrackerNode(Node):
             self.publish_state(msg.header.stamp, res.state)
             self.state_name = "coasting" if res.state.coasting else "tracking"
         else:
-            self.state_name = "lost" if self.tracker.filter.last_measurement is not None else "searching"
+            # lost (ERROR) once it has been tracked, also after the filter's reset
+            self.state_name = "lost" if self.tracker.n_measured > 0 else "searching"
         if self.state_name != before:
             why = f" ({res.reason})" if res.reason and self.state_name != "tracking" else ""
             if self.state_name == "lost":
