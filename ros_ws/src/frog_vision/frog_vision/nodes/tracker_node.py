@@ -16,7 +16,7 @@ import sys
 import cv2
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, TransformStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -56,6 +56,7 @@ PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
     Param("reset_timeout", _F.reset_timeout, "restart the filter after the tag was lost this long [s]",
           min=0.0, max=60.0),
     Param("publish_debug_image", False, "publish frog/tracker/debug_image (annotated frames)", live=True),
+    Param("publish_tf", True, "publish the tracked pose on tf as world_frame -> body_frame"),
 ]
 
 
@@ -95,6 +96,15 @@ class TrackerNode(Node):
         self.odom_pub = self.create_publisher(Odometry, "frog/odom", 10)
         self.debug_pub = self.create_publisher(Image, "frog/tracker/debug_image", 2)
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.tf_pub = None
+        if p["publish_tf"]:
+            try:
+                from tf2_msgs.msg import TFMessage
+            except ImportError:
+                self.get_logger().warning("tf2_msgs is not installed: not publishing tf")
+            else:
+                self._TFMessage = TFMessage
+                self.tf_pub = self.create_publisher(TFMessage, "tf", 100)
         self.window = collections.deque(maxlen=90)        # (detected, latency_s, compute_s, residual)
         self.frames = self.dropped = self.bad_frames = 0
         self.last_stamp = None
@@ -213,6 +223,13 @@ class TrackerNode(Node):
         odom.pose.covariance = _planar_covariance(st.pose_covariance)
         odom.twist.covariance = _planar_covariance(st.twist_covariance)
         self.odom_pub.publish(odom)
+        if self.tf_pub is not None:
+            tf = TransformStamped()
+            tf.header = pose.header
+            tf.child_frame_id = self.cfg["body_frame"]
+            tf.transform.translation.x, tf.transform.translation.y = pose.pose.position.x, pose.pose.position.y
+            tf.transform.rotation = pose.pose.orientation
+            self.tf_pub.publish(self._TFMessage(transforms=[tf]))
 
     def _annotate(self, img, res):
         out = img.copy() if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
