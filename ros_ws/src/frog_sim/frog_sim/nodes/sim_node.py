@@ -277,7 +277,8 @@ class SimNode(Node):
 
     def on_reset(self, request, response):
         p = self.cfg
-        self.world_time_offset += self.sim.time
+        # the reset state is one step after the last state published: stamps strictly increase
+        self.world_time_offset += self.sim.time + self.sim.time_step
         self.sim.reset()
         self.sim.set_pose(p["initial_x"], p["initial_y"], p["initial_heading"])
         if p["gait_frequency_hz"] > 0:
