@@ -161,7 +161,7 @@ def test_emergency_latches_until_cleared_and_protection_refuses(launch, probe, t
     diag = Diag(probe)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     probe.wait_for_subscriber("/frog/primitive")
-    probe.spin_for(0.3)
+    probe.spin_for(1.0)                 # both ends of the DDS link matched before the first sample
 
     # limb protection: H (FR) twice 0.3 s apart -> the second is refused and counted
     publish_primitive(probe, pub, "H")
@@ -412,7 +412,7 @@ def test_shutdown_between_front_and_rear_sends_no_rear(launch, probe, tmp_path):
                                   emulator_params={"imu_rate_hz": 0.0})
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     probe.wait_for_subscriber("/frog/primitive")
-    probe.spin_for(0.2)
+    probe.spin_for(1.0)
     publish_primitive(probe, pub, "B")
     end = time.monotonic() + 3
     while not h_lines(read_log(log)) and time.monotonic() < end:
