@@ -125,7 +125,7 @@ class BridgeNode(Node):
         self.link = SerialLink(p["port"], p["baud"], self.supervisor, self._wake.trigger, p["write_timeout_s"])
         # Device supervision (settle, stall) runs on a steady clock: the device runs in real time
         # even when the graph runs on simulated time. Commands and stamps use the node clock.
-        self.create_timer(0.05, self.supervise, clock=self._steady)
+        self.create_timer(0.1, self.supervise, clock=self._steady)
         self.create_timer(p["diagnostics_period_s"], self.publish_diagnostics, clock=self._steady)
         self.link.start()
         # Objects made so far live as long as the node: keep them out of the collector's full
