@@ -354,6 +354,8 @@ def _readable(fd, timeout=0.0):
 def test_bad_configuration_exits_2(launch, tmp_path):
     b = launch("bridge_node", params={"reconnect_period_s": 2.0, "reconnect_max_period_s": 1.0})
     assert b.wait(60) == 2 and "reconnect_max_period_s" in b.log_text()
+    b = launch("bridge_node", params={"port": ""})
+    assert b.wait(60) == 2 and "port is empty" in b.log_text()
     b = launch("bridge_node", params={"quaternion_order": "zyxw"})
     assert b.wait(60) == 2 and "quaternion_order" in b.log_text()
     (tmp_path / "plain").write_text("x")

@@ -71,6 +71,8 @@ PARAMS = [
 
 
 def _validate(p: dict) -> str | None:
+    if not p["port"].strip():
+        return "port is empty: give the relay's serial device (e.g. /dev/ttyACM0)"
     if p["reconnect_max_period_s"] < p["reconnect_period_s"]:
         return (f"reconnect_max_period_s {p['reconnect_max_period_s']} must be >= reconnect_period_s "
                 f"{p['reconnect_period_s']}")
