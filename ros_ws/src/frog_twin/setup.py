@@ -20,6 +20,7 @@ setup(
         'console_scripts': [
             'frog-planner-eval = frog_twin.eval_cli:main',
             'image_preview = frog_twin.nodes.image_preview:main',
+            'frog-twin = frog_twin.twin:main',
         ],
     },
 )

@@ -1,0 +1,86 @@
+"""A twin run's MCAP recording as arrays: truth, tracked poses, decisions, serial lines, firings.
+
+Everything is read back from the recording (nothing from the processes' memory), so the
+figures a twin run prints can be recomputed by anyone from its MCAP file. Times are header
+stamps in seconds (simulated time in the twin).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from frog_logger.core.log_files import read_messages
+
+#: Topics the analysis reads (root namespace).
+TOPICS = {
+    "truth": "/frog/sim/odom", "tracked": "/frog/odom", "status": "/frog/planner/status",
+    "primitive": "/frog/primitive", "sent": "/frog/bridge/sent", "fired": "/frog/limb_activation",
+    "path": "/frog/path", "shape": "/frog/sim/shape", "preview": "/camera/preview/compressed",
+    "camera_info": "/camera/camera_info",
+}
+
+
+def _t(stamp) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def _yaw(q) -> float:
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+@dataclass
+class TwinRecording:
+    """Arrays of one run; empty arrays for topics that were not recorded."""
+
+    truth: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))     # t, x, y, heading
+    tracked: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))   # t, x, y, heading
+    status: np.ndarray = field(default_factory=lambda: np.zeros((0, 9)))
+    # status columns: t, primitive id, total cost, cost distance, heading, progress, path progress,
+    # distance to path, state
+    primitives: list = field(default_factory=list)   # (t, name)
+    sent: list = field(default_factory=list)         # (t, limbs)
+    fired: list = field(default_factory=list)        # (t, limbs)
+    path: np.ndarray | None = None                   # (M, 2)
+    shapes: list = field(default_factory=list)       # (t, (K, 2) segment end points)
+    preview: list = field(default_factory=list)      # (t, JPEG bytes)
+    camera_info: object = None                       # last sensor_msgs/CameraInfo
+
+
+def read_twin_recording(mcap_files, with_images: bool = True) -> TwinRecording:
+    """Collect the run's topics from one or more MCAP files (split recordings) in time order."""
+    rec = TwinRecording()
+    truth, tracked, status = [], [], []
+    wanted = [v for k, v in TOPICS.items() if with_images or k != "preview"]
+    for f in mcap_files:
+        for topic, _, m in read_messages(f, topics=wanted):
+            if topic == TOPICS["truth"]:
+                p = m.pose.pose.position
+                truth.append([_t(m.header.stamp), p.x, p.y, _yaw(m.pose.pose.orientation)])
+            elif topic == TOPICS["tracked"]:
+                p = m.pose.pose.position
+                tracked.append([_t(m.header.stamp), p.x, p.y, _yaw(m.pose.pose.orientation)])
+            elif topic == TOPICS["status"]:
+                status.append([_t(m.header.stamp), m.primitive_id, m.total_cost, m.cost_distance, m.cost_heading,
+                               m.cost_progress, m.path_progress, m.distance_to_path, m.state])
+            elif topic == TOPICS["primitive"]:
+                rec.primitives.append((_t(m.header.stamp), m.name))
+            elif topic == TOPICS["sent"]:
+                rec.sent.append((_t(m.header.stamp), list(m.limbs)))
+            elif topic == TOPICS["fired"]:
+                rec.fired.append((_t(m.header.stamp), list(m.limbs)))
+            elif topic == TOPICS["path"]:
+                rec.path = np.array([[q.pose.position.x, q.pose.position.y] for q in m.poses])
+            elif topic == TOPICS["shape"]:
+                rec.shapes.append((_t(m.header.stamp), np.array([[q.x, q.y] for q in m.points])))
+            elif topic == TOPICS["preview"]:
+                rec.preview.append((_t(m.header.stamp), bytes(m.data)))
+            elif topic == TOPICS["camera_info"]:
+                rec.camera_info = m
+    order = lambda rows, width: np.array(sorted(rows), dtype=float).reshape(-1, width)  # noqa: E731
+    rec.truth, rec.tracked, rec.status = order(truth, 4), order(tracked, 4), order(status, 9)
+    for name in ("primitives", "sent", "fired", "shapes", "preview"):
+        getattr(rec, name).sort(key=lambda item: item[0])
+    return rec

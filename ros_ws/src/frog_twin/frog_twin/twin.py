@@ -1,0 +1,315 @@
+"""``frog-twin``: the digital twin, closed: camera -> tracker -> planner -> bridge -> robot -> simulator.
+
+Each node is a separate process on an isolated ROS domain, all on the simulator's clock
+(``/clock``), so the twin runs faster than real time with ``--real-time-factor`` and a slow
+machine slows it down instead of breaking it::
+
+    sim_node (world, /clock) -> camera_sim -> tracker_node -> planner_node -> bridge_node
+        -> pty -> robot_emulator -> frog/limb_activation -> sim_node;   recorder; image_preview
+
+Nothing in the loop reads the simulator's ground truth except the camera renderer and, after
+the run, the metrics. Per path it writes into the run folder: ``<path>.png`` (true, tracked
+and reference paths, distance, cost terms, vision error), ``<path>.mp4`` (the rendered
+camera with the path, the tracked pose and the chosen primitive), ``<path>.json``, the MCAP
+recording (``<path>/recording/``) and every node's log; then ``metrics.json`` and a table
+beside the real robot's figures.
+
+Examples
+--------
+frog-twin                                    # line, sine, ellipse -> runs/main_<time>/
+frog-twin --path sine --real-time-factor 2 --seed 3
+frog-twin --path line --no-vision            # ground-truth odometry instead of camera + tracker
+frog-twin --path ellipse --direct            # planner -> simulator without the serial link
+frog-twin --path line --depth 2 --w-heading 150 --duration 60
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+from frog_planner.core.settings import PathSettings, PlannerSettings, add_arguments, as_dict, from_arguments
+from soft_robot_common.processes import NodeProcess, acquire_domain, ros_args
+
+from frog_twin.core import twin_report
+from frog_twin.core.twin_recording import read_twin_recording
+
+PATH_NAMES = ("line", "sine", "ellipse")
+
+#: Realism defaults of the twin (each switchable; see --help).
+HARDWARE_PERIOD_S = 1.43     # decision period measured in the authors' closed-loop logs
+LIMB_STRENGTH_SD = 0.1       # relative spread of the four limbs' kick strengths (real limbs differ)
+
+#: The paths run along the tank's +y, the long side of the overhead camera's view
+#: (frog_vision's default camera: 0.8 m above the origin, image right = tank +y), centred on
+#: the view so the robot stays in the picture.
+PATH_HEADING = math.pi / 2
+
+
+def placed_path_settings(path_settings, name: str):
+    """``path_settings`` for path ``name``, rotated to PATH_HEADING and centred on the tank origin."""
+    import dataclasses
+
+    local = dataclasses.replace(path_settings, path_type=name, path_start_x=0.0, path_start_y=0.0,
+                                path_heading=PATH_HEADING)
+    pts = local.build().points
+    centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    return dataclasses.replace(local, path_start_x=float(-centre[0]), path_start_y=float(-centre[1]))
+
+
+def repo_root() -> Path:
+    """The repository (for runs/); the current folder when installed elsewhere."""
+    here = Path(__file__).resolve()
+    for parent in here.parents:
+        if (parent / "dev").is_file() and (parent / "ros_ws").is_dir():
+            return parent
+    return Path.cwd()
+
+
+def ensure_library(path: Path, states: int, horizon: float = 3.0) -> Path:
+    """Generate the default motion library on first use (frog-library, with progress)."""
+    if path.exists():
+        return path
+    print(f"generating the default motion library on first use: {states} states x 9 primitives -> {path}",
+          flush=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    proc = NodeProcess(["frog-library", "generate", "--states", str(states), "--horizon", str(horizon),
+                        "--out", str(path)], dict(os.environ), path.with_suffix(".log"), "library")
+    while proc.running():
+        time.sleep(2.0)
+    if proc.proc.returncode != 0 or not path.exists():
+        raise RuntimeError(f"library generation failed:\n{proc.log_text()[-3000:]}")
+    return path
+
+
+class PlannerWatch:
+    """An rclpy node on the run's domain: starts the planner and follows its status."""
+
+    def __init__(self, domain):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from soft_robot_interfaces.msg import PlannerStatus
+        from std_srvs.srv import Trigger
+        self._rclpy, self.Trigger, self.Status = rclpy, Trigger, PlannerStatus
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain.domain_id)
+        self.node = rclpy.create_node("twin_watch", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.last = None
+        self.node.create_subscription(PlannerStatus, "/frog/planner/status", self._on_status, 10)
+        from nav_msgs.msg import Odometry
+        self.odom_count = 0
+        self.node.create_subscription(Odometry, "/frog/odom", self._on_odom, 10)
+        self.start_client = self.node.create_client(Trigger, "/planner_node/start")
+
+    def _on_status(self, msg) -> None:
+        self.last = msg
+
+    def _on_odom(self, msg) -> None:
+        self.odom_count += 1
+
+    def spin(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=max(0.0, min(0.05, end - time.monotonic())))
+
+    def wait(self, predicate, timeout: float, what: str, procs=()) -> None:
+        end = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > end:
+                raise TimeoutError(f"{what} within {timeout:.0f} s")
+            for p in procs:
+                if not p.running():
+                    raise RuntimeError(f"{p.name} exited early:\n{p.log_text()[-3000:]}")
+            self.spin(0.1)
+
+    def start_planner(self) -> str:
+        self.wait(self.start_client.service_is_ready, 60, "planner_node/start service")
+        future = self.start_client.call_async(self.Trigger.Request())
+        self.wait(future.done, 30, "reply of planner_node/start")
+        reply = future.result()
+        if not reply.success:
+            raise RuntimeError(f"planner_node refused to start: {reply.message}")
+        return reply.message
+
+    @property
+    def state(self):
+        return None if self.last is None else self.last.state
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self._rclpy.shutdown(context=self.context)
+
+
+def _path_start_pose(args, path_settings):
+    path = path_settings.build()
+    h0 = float(path.tangent_headings[0])
+    x0 = path.points[0] + args.lateral_offset * __import__("numpy").array([-math.sin(h0), math.cos(h0)])
+    return float(x0[0]), float(x0[1]), h0
+
+
+def run_path(args, name: str, out: Path) -> dict:
+    """One closed-loop run of the twin on path ``name``; returns its metrics."""
+    out.mkdir(parents=True, exist_ok=True)
+    path_settings = placed_path_settings(args.path_settings, name)
+    x0, y0, h0 = _path_start_pose(args, path_settings)
+    domain = acquire_domain()
+    sim_clock = {"use_sim_time": True}
+    procs: list[NodeProcess] = []
+    watch = PlannerWatch(domain)
+
+    def start(exe, params, label=None):
+        label = label or exe
+        p = NodeProcess([exe, *ros_args(params)], domain.env, out / f"{label}.log", label)
+        procs.append(p)
+        return p
+
+    try:
+        start("recorder", {**sim_clock, "output_dir": str(out / "recording"), "file_prefix": name,
+                           "exclude_regex": r"image_raw$|debug_image$", "max_file_size_mb": 500.0})
+        start("sim_node", {"publish_clock": True, "real_time_factor": args.real_time_factor,
+                           "initial_x": x0, "initial_y": y0, "initial_heading": h0,
+                           "execute_primitives": args.direct,
+                           "odom_alias_topic": "frog/odom" if args.no_vision else "",
+                           "limb_strength_sd": args.limb_strength_sd, "seed": args.seed})
+        if not args.no_vision:
+            start("camera_sim", {**sim_clock, "seed": args.seed})
+            start("tracker_node", {**sim_clock})
+            start("image_preview", {**sim_clock, "rate_hz": args.video_rate})
+        if not args.direct:
+            link = out / "robot_tty"
+            start("robot_emulator", {**sim_clock, "link_path": str(link), "seed": args.seed,
+                                     "command_log": str(out / "robot_commands.csv")})
+            watch.wait(lambda: link.exists(), 60, "the robot emulator's serial device", procs)
+            start("bridge_node", {**sim_clock, "port": str(link)})
+        start("planner_node", {**sim_clock, "library_file": str(args.library), "autostart": False,
+                               **as_dict(args.settings), **as_dict(path_settings)})
+        watch.wait(lambda: watch.odom_count >= 5, 120, "odometry on /frog/odom (camera + tracker running)", procs)
+        watch.start_planner()
+        limit = args.duration
+        t_start = time.monotonic()
+        print(f"  {name}: following (at most {limit:.0f} s simulated, real-time factor {args.real_time_factor:g})",
+              flush=True)
+        # simulated time from the planner's status stamps
+        while True:
+            watch.spin(0.5)
+            for p in procs:
+                if not p.running():
+                    raise RuntimeError(f"{p.name} exited early:\n{p.log_text()[-3000:]}")
+            if watch.state == watch.Status.STATE_GOAL_REACHED:
+                break
+            if watch.last is not None:
+                sim_now = watch.last.header.stamp.sec + watch.last.header.stamp.nanosec * 1e-9
+                if not hasattr(watch, "sim_start"):
+                    watch.sim_start = sim_now
+                if sim_now - watch.sim_start > limit:
+                    break
+            if time.monotonic() - t_start > 10 * limit / args.real_time_factor + 60:
+                raise RuntimeError(f"{name}: the twin made too little progress in wall time (machine overloaded?)")
+        watch.spin(1.0)
+        wall = time.monotonic() - t_start
+    finally:
+        for p in reversed(procs):
+            if p.running():
+                code = p.stop()
+                if code not in (0, None):
+                    print(f"  warning: {p.name} exited with {code}; log {p.log_path}")
+        watch.close()
+        domain.release()
+    files = sorted((out / "recording").glob("*.mcap"))
+    if not files:
+        raise RuntimeError(f"no recording in {out / 'recording'}; see {out}/recorder.log")
+    rec = read_twin_recording(files)
+    metrics = twin_report.run_metrics(rec, name)
+    metrics["wall_time_s"] = wall
+    metrics["recording"] = [str(f) for f in files]
+    metrics["settings"] = {"planner": as_dict(args.settings), "real_time_factor": args.real_time_factor,
+                           "seed": args.seed, "vision": not args.no_vision, "serial": not args.direct,
+                           "limb_strength_sd": args.limb_strength_sd}
+    w = args.settings.weights
+    twin_report.plot_run(rec, metrics, out.parent / f"{name}.png", weights=(w.distance, w.heading, w.progress))
+    metrics["plot"] = str(out.parent / f"{name}.png")
+    project = None if args.no_vision else _projector(rec)
+    frames = twin_report.write_video(rec, out.parent / f"{name}.mp4", project)
+    metrics["video"] = str(out.parent / f"{name}.mp4") if frames else None
+    (out.parent / f"{name}.json").write_text(json.dumps(metrics, indent=1, default=float) + "\n")
+    return metrics
+
+
+def _projector(rec):
+    """tank points -> preview pixels with the simulated camera's model and pose (frog_vision core)."""
+    if rec.camera_info is None or not rec.preview:
+        return None
+    import cv2
+    import numpy as np
+    from frog_vision.core.camera_model import CameraModel
+    from frog_vision.core.tank_calibration import CameraPose
+    info = rec.camera_info
+    camera = CameraModel.from_camera_info({"width": info.width, "height": info.height, "k": list(info.k),
+                                           "d": list(info.d), "distortion_model": info.distortion_model})
+    pose = CameraPose.overhead(0.8)   # camera_sim's default pose (frog_vision.nodes.common)
+    h = cv2.imdecode(np.frombuffer(rec.preview[0][1], np.uint8), cv2.IMREAD_COLOR).shape[0]
+    scale = h / info.height
+    return lambda pts: pose.project(camera, pts) * scale
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="frog-twin", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--path", choices=[*PATH_NAMES, "all"], default="all", help="path(s) to follow (default all)")
+    ap.add_argument("--real-time-factor", type=float, default=1.0,
+                    help="simulated seconds per wall second (all nodes follow /clock)")
+    ap.add_argument("--seed", type=int, default=1, help="seed of every random element (noise, BLE jitter, limbs)")
+    ap.add_argument("--duration", type=float, default=150.0, help="simulated seconds at most per path")
+    ap.add_argument("--no-vision", action="store_true", help="ground-truth odometry instead of camera + tracker")
+    ap.add_argument("--direct", action="store_true", help="planner -> simulator without bridge, pty and emulator")
+    ap.add_argument("--limb-strength-sd", type=float, default=LIMB_STRENGTH_SD,
+                    help="relative spread of the limbs' kick strengths, drawn per limb from the seed (0 = nominal)")
+    ap.add_argument("--lateral-offset", type=float, default=0.0, help="start left of the path [m]")
+    ap.add_argument("--video-rate", type=float, default=5.0, help="frames per simulated second in the video")
+    ap.add_argument("--library", type=Path, default=None,
+                    help="motion library (default runs/library/frog_default.npz, generated on first use)")
+    ap.add_argument("--library-states", type=int, default=200, help="size of the default library if generated")
+    ap.add_argument("--out", type=Path, default=None, help="run folder (default runs/main_<time>)")
+    add_arguments(ap, PlannerSettings)
+    add_arguments(ap, PathSettings, exclude=("path_type", "path_start_x", "path_start_y", "path_heading",
+                                             "waypoint_file"))
+    ap.set_defaults(period=HARDWARE_PERIOD_S)
+    args = ap.parse_args(argv)
+    if not (args.real_time_factor > 0 and args.duration > 0 and 0 <= args.limb_strength_sd < 1):
+        ap.error("--real-time-factor and --duration must be > 0, --limb-strength-sd in [0, 1)")
+    try:
+        args.settings = from_arguments(PlannerSettings, args)
+        args.path_settings = from_arguments(PathSettings, args, path_type="line")
+    except ValueError as exc:
+        ap.error(str(exc))
+    root = repo_root()
+    default_library = root / "runs" / "library" / "frog_default.npz"
+    if args.library is None:
+        args.library = ensure_library(default_library, args.library_states)
+    elif not args.library.exists():
+        ap.error(f"library {args.library} does not exist (frog-library generate --out ...)")
+    out = args.out or root / "runs" / time.strftime("main_%Y%m%d_%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    names = PATH_NAMES if args.path == "all" else (args.path,)
+    results = []
+    for name in names:
+        print(f"twin: {name} path -> {out}", flush=True)
+        results.append(run_path(args, name, out / name))
+    (out / "metrics.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
+    print()
+    print(twin_report.summary_table(results))
+    print("\nwall time per path: " + ", ".join(f"{m['path']} {m['wall_time_s']:.0f} s" for m in results))
+    print(f"plots, videos, metrics: {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
