@@ -11,6 +11,7 @@ import signal
 import sys
 
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
@@ -44,6 +45,9 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
                                    + (f" (did you mean '{hint}'?)" if hint else ""))
         if SimClockWatch.wanted(node):
             node._sim_clock_watch = SimClockWatch(node)
+        # rclpy's wait returns to Python (where the signal handler runs) only when something is
+        # ready: a steady 0.2 s no-op timer bounds how long SIGINT/SIGTERM can wait
+        node._signal_tick = node.create_timer(0.2, lambda: None, clock=Clock(clock_type=ClockType.STEADY_TIME))
         rclpy.spin(node, executor=executor() if executor is not None else None)
     except (ConfigurationError, ParameterException) as exc:
         name = getattr(node_class, "NODE_NAME", node_class.__name__)
