@@ -468,16 +468,17 @@ def format_table(rep: FidelityReport) -> str:
               f'real {deg * s["ef_repeated_yaw_rate"]["real"]["mean"]:.1f} deg/s, '
               f'sim {deg * s["ef_repeated_yaw_rate"]["sim"]["mean"]:.1f} deg/s']
     k = rep.kick_from_rest
-    lines.append(f'  single E kick from rest (sim): peak {deg * k["peak_yaw_rate"]:.1f} deg/s at {k["peak_time"]:.2f} s, '
-                 f'{100 * k["ratio_at_1p5s"]:.0f} % of it left at 1.5 s, total turn {deg * k["heading_change_total"]:.1f} deg')
+    lines.append(f'  single E kick from rest (sim): peak {deg * k["peak_yaw_rate"]:.1f} deg/s at '
+                 f'{k["peak_time"]:.2f} s, {100 * k["ratio_at_1p5s"]:.0f} % of it left at 1.5 s, '
+                 f'total turn {deg * k["heading_change_total"]:.1f} deg')
     r = rep.repeated
     t63 = f'{r["t63"]:.1f} s' if r['t63'] is not None else 'not reached'
     lines.append(f'  E every {r["period"]:.2f} s from rest (sim): steady {deg * r["steady_yaw_rate"]:.1f} deg/s, '
                  f'63 % after {t63} (issue, real: 13.5 deg/s, 2.3 s)')
     c = rep.coasting
     t5 = f'{c["time_to_5mm_s"]:.1f} s' if c['time_to_5mm_s'] is not None else f'> {c["duration"]:.0f} s'
-    lines.append(f'  coasting from {1e3 * c["start_speed"]:.0f} mm/s (sim): {1e3 * c["speed_at_5s"]:.1f} mm/s after 5 s, '
-                 f'{1e3 * c["speed_at_20s"]:.1f} after 20 s, below 5 mm/s after {t5}, '
+    lines.append(f'  coasting from {1e3 * c["start_speed"]:.0f} mm/s (sim): {1e3 * c["speed_at_5s"]:.1f} mm/s '
+                 f'after 5 s, {1e3 * c["speed_at_20s"]:.1f} after 20 s, below 5 mm/s after {t5}, '
                  f'{1e3 * c["distance"]:.0f} mm in {c["duration"]:.0f} s')
     if rep.speeds:
         sp = rep.speeds

@@ -201,7 +201,7 @@ def build_frog_model(params: FrogParameters | None = None, relaxed_curvature: fl
     n_limb = p.limb_edges
     turning = 2.0 * np.arctan(0.5 * relaxed_curvature * dl)  # kappa = 2 tan(phi/2)/dl
     limb_kw = dict(stretching_stiffness=p.limb_young_relaxed * p.limb_area,
-                   linear_density=p.limb_density * p.limb_area, diameter=2 * p.limb_radius,
+                   linear_density=p.limb_density * p.limb_area, diameter=p.limb_fluid_width,
                    drag_normal=p.limb_drag_normal, drag_tangent=p.limb_drag_tangent)
     limb_nodes, limb_sign, bend_ranges, edge_ranges, root_bends, root_base = {}, {}, {}, {}, {}, {}
     for limb in LIMB_NAMES:
@@ -209,7 +209,8 @@ def build_frog_model(params: FrogParameters | None = None, relaxed_curvature: fl
         side_nb, direction, sign = layout[limb]
         sign = int(sign * curl)
         # turn the lateral direction by the root angle (negative: toward the rear)
-        aft = np.radians(p.limb_root_angle_deg) * (-1.0 if direction[1] > 0 else 1.0)
+        root_deg = p.limb_root_angle_deg + (p.front_root_angle_offset_deg if limb in ('FL', 'FR') else 0.0)
+        aft = np.radians(root_deg) * (-1.0 if direction[1] > 0 else 1.0)
         direction = (np.cos(aft) * direction[0] - np.sin(aft) * direction[1],
                      np.sin(aft) * direction[0] + np.cos(aft) * direction[1])
         pts = _limb_points(ring[corner], direction, n_limb, dl, sign * turning)
@@ -230,7 +231,15 @@ def build_frog_model(params: FrogParameters | None = None, relaxed_curvature: fl
         limb_nodes[limb] = ids
         limb_sign[limb] = sign
     network = builder.build()
-    mass = lumped_masses(network, p.fluid_density, p.added_mass_coefficient)
+    if p.body_fluid_section == 'height':
+        # the body's sides are H_f (front) to H_a (rear) tall: D of eq. 1 and 3 (Fig. 2b)
+        body = network.edge_group == BODY_GROUP
+        mid_x = 0.5 * (network.positions[network.edges[:, 0], 0] + network.positions[network.edges[:, 1], 0])
+        share = np.clip((mid_x + half) / side, 0.0, 1.0)
+        network.edge_diameter[body] = (p.aft_dimension_ha
+                                       + (p.front_dimension_hf - p.aft_dimension_ha) * share[body])
+    lumping = 0.5 if p.added_mass_lumping == 'direction_average' else 1.0
+    mass = lumped_masses(network, p.fluid_density, p.added_mass_coefficient, lumping_factor=lumping)
     pose = network.positions - center_of_mass(network.positions, mass)
     assert n_ring == 4 * n
     return FrogModel(params=p, network=network, mass=mass, corner_nodes=corner_of,

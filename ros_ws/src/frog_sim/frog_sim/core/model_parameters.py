@@ -98,6 +98,18 @@ class FrogParameters:
     limb_curl_direction: str = field(default='backward', metadata={'choices': ('forward', 'backward'), 'unit': '-'})
     # limb root direction: 0 lateral, -90 aft, +90 forward
     limb_root_angle_deg: float = field(default=-75.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
+    # --- fluid sections (issue 11) ---
+    # 'rod': body drag/added mass with body_rod_diameter (the legacy 4 mm rod); 'height': the
+    # body's own height, H_f at the front side to H_a at the rear side (Fig. 2b)
+    body_fluid_section: str = field(default='rod', metadata={'choices': ('rod', 'height'), 'unit': '-'})
+    # projected width of a limb strip normal to the swimming plane (drag eq. 1, added mass eq. 3)
+    limb_fluid_width: float = field(default=0.004, metadata={'range': (0.002, 0.03), 'unit': 'm'})
+    # eq. 4 lumping of added mass: 'normal' (paper: full normal value at every node) or
+    # 'direction_average' (half of it: a slender section has added mass only normal to itself)
+    added_mass_lumping: str = field(default='normal', metadata={'choices': ('normal', 'direction_average'),
+                                                              'unit': '-'})
+    # front limbs' root direction relative to the rear limbs' (0: all four alike)
+    front_root_angle_offset_deg: float = field(default=0.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
 
     def replace(self, **changes) -> 'FrogParameters':
         """Return a copy with some fields changed (validated)."""
@@ -134,6 +146,10 @@ class FrogParameters:
                              'must be in (0, 1]')
         if int(self.body_edges_per_side) < 2:
             raise ValueError(f'body_edges_per_side = {self.body_edges_per_side!r} must be >= 2')
+        for f in fields(self):
+            choices = f.metadata.get('choices')
+            if choices is not None and getattr(self, f.name) not in choices:
+                raise ValueError(f'{f.name} = {getattr(self, f.name)!r}, expected one of {choices}')
         if self.limb_curl_direction not in ('forward', 'backward'):
             raise ValueError(f"limb_curl_direction = {self.limb_curl_direction!r}, "
                              "expected 'forward' or 'backward'")
@@ -220,6 +236,15 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
                             'from lateral (0) toward the rear (-90 = pointing aft); sweep '
                             '-90/-75/-60/-45 deg gave speed RMS 5.7/4.3/4.6/5.9 mm/s vs the 10 % '
                             'calibration runs -> limbs point aft, 15 deg outward, like frog legs'),
+    'body_fluid_section': ('-', "'height': the body's sides are H_f (front) to H_a (rear) tall (Fig. 2b), so "
+                           "eq. 1 and 3 use that height as D; 'rod': the 4 mm body_rod_diameter"),
+    'limb_fluid_width': ('m', 'projected width of the flat limb strip normal to the plane (Fig. 3a); not given '
+                         'by the paper (4 mm = the rod diameter 2 r)'),
+    'added_mass_lumping': ('-', "eq. 4 lumps added mass isotropically; 'direction_average' uses half the normal "
+                           'value (a slender section has added mass only normal to itself: exact for a '
+                           "translating square ring); 'normal' = paper"),
+    'front_root_angle_offset_deg': ('deg', 'front limbs turned by this much relative to limb_root_angle_deg '
+                                    '(Fig. 2b gives no angle for either pair)'),
     'pulse_duration': ('s', 'DESIGN.md hardware pulse 80 ms (paper characterisation 70 ms)'),
     'primitive_period': ('s', 'DESIGN.md: one primitive per 1.5 s'),
     'limb_curl_direction': ('-', "'backward' = the curl turns a lateral limb toward the rear, i.e. an "
