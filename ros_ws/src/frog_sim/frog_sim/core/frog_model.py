@@ -8,9 +8,13 @@ Layout (robot frame ``frog``: x forward, y left, origin at the body centre):
 * limbs FL, FR, BL, BR: one rod of ``L_i`` per corner. Each corner node joins three
   edges and carries two bending energies (body corner + limb root), paper "Energy ...".
   The root direction is the lateral direction turned toward the rear by
-  ``-limb_root_angle_deg`` (default -75 deg: pointing aft, 15 deg outward of the body
-  axis, like frog legs). Fig. 2b does not give this angle; it was calibrated against
-  the 10 % EGaIn speed runs (see ``model_parameters``), as the paper did with C_bn.
+  ``-limb_root_angle_deg`` (rear limbs; default -90 deg: straight aft), the front limbs
+  ``front_root_angle_offset_deg`` further forward (default 61: 29 deg aft of lateral).
+  Fig. 2b gives no angle; both were calibrated jointly against the hardware turning
+  transitions and the speed experiments (``frog-sweep calibrate``, issue 11).
+* Fluid sections: the body's edges take its height as D in eq. 1 and 3 (H_f at the front
+  side to H_a at the rear, linear along the sides); the limb edges the strip width
+  ``limb_fluid_width``.
   The root bend (body side edge -> first limb edge) is the clamp of the limb: only
   its limb half cell bends, so its stiffness is 2 E(t) I (rigid body half in series),
   and it carries the limb curvature of that half cell, so that the whole limb length
