@@ -23,13 +23,14 @@ from .rigid_body import HeadingUnwrapper, RigidBodyState, nodal_velocities, rigi
 from .schedules import LIMB_NAMES, ActivationSchedule
 
 #: Default time step [s], chosen from the dt convergence study (``frog-sim convergence``
-#: plus finer steps; 10 cycles at 1 Hz, 10 % EGaIn): the 10-cycle displacement is
-#: 398.1 / 406.3 / 408.0 / 406.9 / 404.2 / 401.3 / 399.3 / 398.2 mm at dt = 8 / 4 / 2 / 1 /
-#: 0.5 / 0.25 / 0.125 / 0.0625 ms. Below 0.5 ms the changes shrink (2.9, 2.0, 1.1 mm) toward
-#: ~397 mm; above, the error is not yet asymptotic because backward Euler damps the limb's
-#: bending modes (60 Hz - 1.5 kHz, no material damping in the model) more or less with dt.
-#: 2 ms is within 3 % of the dt -> 0 estimate and within 0.1 % / 2.4 % of 1 ms for 30 %
-#: EGaIn at 1.3 Hz / 50 % at 2 Hz (4 ms: 2.3 % / 5.2 %), at ~1/4 of the 1 ms cost.
+#: plus finer steps; 10 cycles at 1 Hz, 10 % EGaIn), rerun for the issue-11 fluid model:
+#: the 10-cycle displacement is 404.5 / 431.5 / 445.7 / 452.2 / 455.2 / 456.5 / 457.1 mm at
+#: dt = 8 / 4 / 2 / 1 / 0.5 / 0.25 / 0.125 ms. The changes (27.0, 14.1, 6.6, 3.0, 1.3,
+#: 0.6 mm) halve with dt: backward Euler's first order, dt -> 0 estimate ~457.6 mm.
+#: 2 ms is 2.6 % below it and within 2.1 % / 1.0 % of 1 ms for 30 % EGaIn at 1.3 Hz /
+#: 50 % at 2 Hz, with half the steps of 1 ms. Halving dl (46, 92 edges per side, 1 ms)
+#: changes it by 1.5 and 0.1 mm. (The earlier 4 mm-rod model was not yet asymptotic
+#: above 0.5 ms: the limbs' stiff bending modes were less damped by the fluid.)
 DEFAULT_TIME_STEP = 2.0e-3
 #: Default Newton force tolerance [N]: ~0.1 % of the nodal drag/inertia forces of a limb
 #: during a kick (~1e-3 N). Tightening it to 1e-8 N changes the 10-cycle displacement at
