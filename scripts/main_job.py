@@ -31,9 +31,10 @@ import sys
 import time
 from pathlib import Path
 
+from frog_planner.core.settings import PathSettings, PlannerSettings, add_arguments, as_dict, from_arguments
+from soft_robot_common.processes import NodeProcess, acquire_domain, ros_args
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-from ros_harness import NodeProcess, acquire_domain, ros_args  # noqa: E402
 
 DEFAULT_LIBRARY = ROOT / "runs" / "library" / "frog_default.npz"
 TOPICS = ["/frog/sim/odom", "/frog/sim/shape", "/frog/primitive", "/frog/planner/status",
@@ -62,7 +63,7 @@ def ensure_library(path: Path, states: int) -> Path:
 def start_graph(args, out: Path, domain, planner: bool):
     import numpy as np
 
-    from frog_planner.evaluation import PATHS
+    from frog_twin.core.evaluation import PATHS
     procs = []
     rec = NodeProcess(["recorder", *ros_args({"output_dir": str(out / "recording"),
                                               "file_prefix": "loop", "topics": TOPICS})],
@@ -73,10 +74,10 @@ def start_graph(args, out: Path, domain, planner: bool):
                   "publish_clock": args.real_time_factor != 1.0,
                   "model.egain_vol_pct": args.egain}
     if planner:
-        path = PATHS[args.path]()
+        path = PATHS[args.path_type]()
         h0 = float(path.tangent_headings[0])
         x0 = path.points[0] + args.lateral_offset * np.array([-math.sin(h0), math.cos(h0)])
-        sim_params.update({"odom_alias_topic": "/frog/odom", "initial_x": float(x0[0]),
+        sim_params.update({"odom_alias_topic": "frog/odom", "initial_x": float(x0[0]),
                            "initial_y": float(x0[1]), "initial_heading": h0})
     else:
         sim_params.update({"gait_frequency_hz": args.frequency, "gait_phase_offset": args.phase})
@@ -86,13 +87,7 @@ def start_graph(args, out: Path, domain, planner: bool):
     sim.wait_for_log("simulating the frog", 120)
     if planner:
         pl = NodeProcess(["planner_node", *ros_args({
-            "library_file": str(args.library), "path_type": args.path, "period": args.period,
-            "depth": args.depth, "metric": args.metric,
-            "heading_lookahead": args.heading_lookahead,
-            "gradient_correction": args.gradient_correction,
-            "velocity_lookahead": args.velocity_lookahead, "yaw_rate_weight": args.yaw_rate_weight,
-            "w_distance": args.w_a, "w_heading": args.w_b, "w_progress": args.w_c,
-            "goal_lateral_tolerance": args.goal_lateral_tolerance,
+            "library_file": str(args.library), **as_dict(args.settings), **as_dict(args.path_settings),
             "use_sim_time": args.real_time_factor != 1.0})],
             domain.env, out / "planner_node.log", "planner_node")
         procs.append(pl)
@@ -100,25 +95,57 @@ def start_graph(args, out: Path, domain, planner: bool):
     return procs
 
 
+class StatusWatch:
+    """Follows ``/frog/planner/status`` on the run's domain: has the planner reached the goal?"""
+
+    def __init__(self, domain):
+        import rclpy
+        from rclpy.node import Node
+        from soft_robot_interfaces.msg import PlannerStatus
+        os.environ.update({k: domain.env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = Node("main_job_watch", context=self.context)
+        self.goal_state = PlannerStatus.STATE_GOAL_REACHED
+        self.last = None
+        self.node.create_subscription(PlannerStatus, "/frog/planner/status", self._on_status, 10)
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def _on_status(self, msg) -> None:
+        self.last = msg
+
+    def goal_reached(self, seconds: float) -> bool:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=max(0.0, min(0.1, end - time.monotonic())))
+        return self.last is not None and self.last.state == self.goal_state
+
+    def close(self) -> None:
+        import rclpy
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
 def run(args, out: Path, planner: bool) -> Path:
     from tqdm import tqdm
     domain = acquire_domain()
     procs = []
+    watch = StatusWatch(domain) if planner else None
     try:
         procs = start_graph(args, out, domain, planner)
-        pl = procs[-1] if planner else None
         limit = (args.max_time if planner else args.duration) / args.real_time_factor
         t0 = time.monotonic()
         with tqdm(total=round(limit), unit="s", desc="closed loop (wall s)" if planner
                   else "swimming (wall s)") as bar:
             while time.monotonic() - t0 < limit:
-                time.sleep(0.5)
+                reached = watch.goal_reached(0.5) if watch else time.sleep(0.5)
                 bar.n = min(round(time.monotonic() - t0), bar.total)
                 bar.refresh()
                 for p in procs:
                     if not p.running():
                         raise RuntimeError(f"{p.name} exited early:\n{p.log_text()[-3000:]}")
-                if pl is not None and "goal reached" in pl.log_text():
+                if reached:
                     bar.set_description("goal reached")
                     break
         time.sleep(1.0)
@@ -129,6 +156,8 @@ def run(args, out: Path, planner: bool) -> Path:
         for p in procs:
             if p.running():
                 p.stop()
+        if watch is not None:
+            watch.close()
         domain.release()
     files = sorted((out / "recording").glob("loop_*.mcap"))
     if not files:
@@ -150,7 +179,7 @@ def read_recording(mcap: Path) -> dict:
                          2 * math.atan2(q.z, q.w), m.twist.twist.linear.x])
         elif topic == "/frog/planner/status":
             status.append([t, m.primitive_id, m.total_cost, m.cost_distance, m.cost_heading,
-                           m.cost_progress, m.path_progress, m.distance_to_path])
+                           m.cost_progress, m.path_progress, m.distance_to_path, m.state])
         elif topic == "/frog/primitive":
             prims.append((t, m.name))
         elif topic == "/frog/path":
@@ -161,28 +190,22 @@ def read_recording(mcap: Path) -> dict:
             "path": path, "shapes": shapes}
 
 
-def distance_to_polyline(points, path):
-    """Distance [m] of each point to a polyline (independent of the planner's code)."""
-    import numpy as np
-    a, d = path[:-1], np.diff(path, axis=0)
-    p = points[:, None, :]
-    t = np.clip(((p - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0, 1)
-    return np.min(np.linalg.norm(a + t[..., None] * d - p, axis=-1), axis=1)
-
-
 def analyse_closed_loop(mcap: Path, out: Path, args) -> dict:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from frog_planner.evaluation import samples_before_finish
+    from frog_twin.core.metrics import distance_to_polyline, samples_before_finish
     rec = read_recording(mcap)
     odom, status, path = rec["odom"], rec["status"], rec["path"]
     if len(odom) < 10 or path is None:
         raise RuntimeError(f"recording {mcap} lacks odometry or the path")
     t0 = odom[0, 0]
-    goal = bool(len(status)) and "goal reached" in (out / "planner_node.log").read_text()
+    from soft_robot_interfaces.msg import PlannerStatus
+    goal = bool(len(status)) and bool(np.any(status[:, 8] == PlannerStatus.STATE_GOAL_REACHED))
+    if goal:
+        status = status[:int(np.argmax(status[:, 8] == PlannerStatus.STATE_GOAL_REACHED)) + 1]
     if goal:  # the run ends at the goal; the robot coasting on afterwards is not tracking
         odom = odom[odom[:, 0] <= status[-1, 0] + 1e-6]
     odom = odom[:samples_before_finish(odom[:, 1:3], path)]
@@ -194,11 +217,7 @@ def analyse_closed_loop(mcap: Path, out: Path, args) -> dict:
     length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
     from collections import Counter
     metrics = {
-        "path": args.path, "path_length_m": length, "period_s": args.period, "depth": args.depth,
-        "metric": args.metric, "heading_lookahead_m": args.heading_lookahead,
-        "gradient_correction": args.gradient_correction,
-        "velocity_lookahead_s": args.velocity_lookahead, "yaw_rate_weight": args.yaw_rate_weight,
-        "weights": [args.w_a, args.w_b, args.w_c],
+        "path": args.path_type, "path_length_m": length, "planner_settings": as_dict(args.settings),
         "library": str(args.library), "goal_reached": goal,
         "completion_time_s": float(end_t) if goal else None, "final_progress": progress,
         "mean_distance_m": float(dist.mean()), "max_distance_m": float(dist.max()),
@@ -218,7 +237,7 @@ def analyse_closed_loop(mcap: Path, out: Path, args) -> dict:
     ax.plot(*(path[-1] * 100), "r*", ms=13, label="goal")
     ax.set_aspect("equal")
     ax.set(xlabel="x [cm] (tank)", ylabel="y [cm]",
-           title=f"{args.path}: closed loop, T = {args.period} s, depth {args.depth}")
+           title=f"{args.path_type}: closed loop, T = {args.settings.period} s, depth {args.settings.depth}")
     ax.legend(fontsize=8)
     ax = axes[1]
     ax.plot(t, dist * 100)
@@ -227,7 +246,8 @@ def analyse_closed_loop(mcap: Path, out: Path, args) -> dict:
     ax = axes[2]
     if len(status):
         ts = status[:, 0] - t0
-        w = (500.0, 50.0, 300.0)
+        cw = args.settings.weights
+        w = (cw.distance, cw.heading, cw.progress)   # the weights this run used (NaN rows: no decision)
         for j, name in enumerate(("w_a * distance", "w_b * heading", "w_c * (1 - progress)")):
             ax.plot(ts, status[:, 3 + j] * w[j], label=name)
         ax.plot(ts, status[:, 2], "k", label="total of the chosen branch")
@@ -284,25 +304,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--mode", choices=["closed-loop", "gait"], default="closed-loop")
-    ap.add_argument("--path", choices=["line", "sine", "ellipse"], default="line")
+    ap.add_argument("--path", dest="path_type", choices=["line", "sine", "ellipse"], default="line",
+                    help="reference path (paper eq. 15-17)")
     ap.add_argument("--lateral-offset", type=float, default=0.0, help="start left of the path [m]")
-    ap.add_argument("--period", type=float, default=1.5, help="primitive period T [s]")
-    ap.add_argument("--depth", type=int, default=1)
-    ap.add_argument("--metric", choices=["euclidean", "relative"], default="euclidean")
-    ap.add_argument("--heading-lookahead", type=float, default=0.1,
-                    help="planner heading error against the path this far ahead [m] (0 = paper: tangent)")
-    ap.add_argument("--gradient-correction", action=argparse.BooleanOptionalAction, default=True,
-                    help="planner corrects library transitions to first order for the velocity difference")
-    ap.add_argument("--velocity-lookahead", type=float, default=1.5,
-                    help="planner costs each leaf extrapolated by its predicted velocities over this time [s] "
-                         "(0 = paper)")
-    ap.add_argument("--yaw-rate-weight", type=float, default=0.0,
-                    help="planner weight per rad/s of |yaw rate - path curvature x speed| (0 = paper)")
-    ap.add_argument("--w-a", type=float, default=500.0, help="eq. 19 weight of the distance to the path")
-    ap.add_argument("--w-b", type=float, default=50.0, help="eq. 19 weight of the heading error")
-    ap.add_argument("--w-c", type=float, default=300.0, help="eq. 19 weight of (1 - progress)")
-    ap.add_argument("--goal-lateral-tolerance", type=float, default=0.0,
-                    help="crossing the finish line counts only this close to the end [m] (0 = goal tolerance)")
+    add_arguments(ap, PlannerSettings)
+    add_arguments(ap, PathSettings, exclude=("path_type", "path_start_x", "path_start_y", "path_heading",
+                                             "waypoint_file"))
     ap.add_argument("--library", type=Path, default=DEFAULT_LIBRARY)
     ap.add_argument("--library-states", type=int, default=200, help="size if generated")
     ap.add_argument("--max-time", type=float, default=90.0, help="simulated seconds at most")
@@ -315,6 +322,11 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not (args.max_time > 0 and args.duration > 0 and args.real_time_factor > 0):
         ap.error("--max-time, --duration and --real-time-factor must be > 0")
+    try:
+        args.settings = from_arguments(PlannerSettings, args)
+        args.path_settings = from_arguments(PathSettings, args)
+    except ValueError as exc:
+        ap.error(str(exc))
     out = args.out or ROOT / "runs" / time.strftime("main_%Y%m%d_%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     if args.mode == "closed-loop":

@@ -1,166 +1,18 @@
-"""Start real node processes on an isolated ROS 2 domain, watch the graph, stop them cleanly.
+"""System-test harness: node processes on an isolated ROS 2 domain, and a graph probe.
 
-Used by the fixtures in ``conftest.py``; importable by benchmarks too. Every process runs
-in its own session (process group) so a stop reaches the node and any children:
-SIGINT first (a node's normal shutdown), then SIGTERM, then SIGKILL.
+Process supervision (domains, :class:`NodeProcess`, ``ros_args``) is a product feature and
+lives in ``soft_robot_common.processes``; this module re-exports it for the tests and adds
+the rclpy-based :class:`GraphProbe` and a pty pair for serial tests.
 """
 
 from __future__ import annotations
 
-import fcntl
 import os
-import re
-import shutil
-import signal
-import subprocess
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Callable, Optional
+from typing import Callable
 
-DOMAIN_RANGE = range(120, 230)   # Fast DDS ports overflow above domain 232
-LOCK_DIR = Path("/tmp/soft_robot_test_domains")
-
-
-@dataclass
-class RosDomain:
-    """An exclusively held ROS domain id and the environment that selects it."""
-
-    domain_id: int
-    env: dict
-    _lock_file: object = field(default=None, repr=False)
-
-    def release(self) -> None:
-        if self._lock_file is not None:
-            self._lock_file.close()
-            self._lock_file = None
-
-
-def acquire_domain(base_env: Optional[dict] = None) -> RosDomain:
-    """Pick a domain id no other test process on this machine holds (lock files)."""
-    LOCK_DIR.mkdir(exist_ok=True)
-    start = (os.getpid() * 7919 + time.monotonic_ns()) % len(DOMAIN_RANGE)
-    for i in range(len(DOMAIN_RANGE)):
-        domain = DOMAIN_RANGE[(start + i) % len(DOMAIN_RANGE)]
-        f = open(LOCK_DIR / f"{domain}.lock", "w")
-        try:
-            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            f.close()
-            continue
-        env = dict(os.environ if base_env is None else base_env)
-        env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-                   ROS_PYTHON_CHECK_FIELDS="1", PYTHONUNBUFFERED="1",
-                   RCUTILS_COLORIZED_OUTPUT="0")
-        env.pop("ROS_LOCALHOST_ONLY", None)  # deprecated in Jazzy; conflicts with the range
-        return RosDomain(domain, env, f)
-    raise RuntimeError(f"no free ROS domain id in {DOMAIN_RANGE}")
-
-
-class NodeProcess:
-    """One started executable: its log file, its exit, and a clean stop."""
-
-    def __init__(self, argv: list[str], env: dict, log_path: Path, name: str,
-                 cwd: Optional[Path] = None, preexec_fn: Optional[Callable] = None):
-        exe = shutil.which(argv[0], path=env.get("PATH"))
-        if exe is None:
-            raise FileNotFoundError(
-                f"executable {argv[0]!r} is not on PATH; run the tests through './dev test' "
-                f"so the workspace is built and sourced")
-        self.name = name
-        self.argv = [exe, *argv[1:]]
-        self.log_path = Path(log_path)
-        self._log = open(self.log_path, "wb")
-        self.started_at = time.monotonic()
-        self.proc = subprocess.Popen(self.argv, env=env, cwd=cwd, stdout=self._log,
-                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                     start_new_session=True, preexec_fn=preexec_fn)
-        self.stop_signal: Optional[str] = None   # which signal finally ended it
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-    def running(self) -> bool:
-        return self.proc.poll() is None
-
-    def log_text(self) -> str:
-        if not self._log.closed:
-            self._log.flush()
-        return self.log_path.read_text(errors="replace")
-
-    def wait_for_log(self, pattern: str, timeout: float = 10.0) -> re.Match:
-        """Wait until the process log matches ``pattern`` (regex); raise on timeout/exit."""
-        rx = re.compile(pattern)
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            m = rx.search(self.log_text())
-            if m:
-                return m
-            if not self.running():
-                raise AssertionError(f"{self.name} exited (code {self.proc.returncode}) before "
-                                     f"logging {pattern!r}:\n{self.log_text()[-3000:]}")
-            time.sleep(0.05)
-        raise TimeoutError(f"{self.name} did not log {pattern!r} within {timeout} s:\n"
-                           f"{self.log_text()[-3000:]}")
-
-    def wait(self, timeout: float) -> int:
-        return self.proc.wait(timeout)
-
-    def send(self, sig: int) -> None:
-        try:
-            os.killpg(self.proc.pid, sig)
-        except ProcessLookupError:
-            pass
-
-    def stop(self, sigint_timeout: float = 10.0, sigterm_timeout: float = 5.0) -> int:
-        """SIGINT the process group, escalating to SIGTERM then SIGKILL; return the code."""
-        for sig, timeout in ((signal.SIGINT, sigint_timeout), (signal.SIGTERM, sigterm_timeout),
-                             (signal.SIGKILL, 10.0)):
-            if not self.running():
-                break
-            self.send(sig)
-            try:
-                self.proc.wait(timeout)
-                self.stop_signal = self.stop_signal or sig.name
-            except subprocess.TimeoutExpired:
-                continue
-        # Reap anything left in the group (children of a wrapper).
-        try:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-        self._log.close()
-        return self.proc.returncode
-
-    @property
-    def stopped_cleanly(self) -> bool:
-        return self.stop_signal in (None, "SIGINT") and self.proc.returncode == 0
-
-
-def ros_args(params: Optional[dict] = None, remap: Optional[dict] = None,
-             node_name: Optional[str] = None) -> list[str]:
-    """``--ros-args`` for parameters (typed as Python values), remappings, node name."""
-    out: list[str] = []
-    for k, v in (params or {}).items():
-        out += ["-p", f"{k}:={_param_literal(v)}"]
-    for k, v in (remap or {}).items():
-        out += ["-r", f"{k}:={v}"]
-    if node_name:
-        out += ["-r", f"__node:={node_name}"]
-    return ["--ros-args", *out] if out else []
-
-
-def _param_literal(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return repr(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ",".join(_param_literal(x) for x in v) + "]"
-    if isinstance(v, str):
-        return "'" + v + "'" if v == "" or re.fullmatch(r"[-+0-9.eE]+|true|false", v) else v
-    return str(v)
+from soft_robot_common.processes import (DOMAIN_RANGE, LOCK_DIR, NodeProcess, RosDomain,  # noqa: F401
+                                         acquire_domain, ros_args)
 
 
 class GraphProbe:

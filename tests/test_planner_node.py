@@ -51,10 +51,14 @@ def test_decides_every_period_and_reports_idle_reasons(launch, probe, library):
     node.wait_for_log("following a line path", timeout=60)
     probe.wait_for_subscriber("/test/odom", timeout=20)
 
-    # no odometry yet: primitive I, and the reason is logged once
-    probe.spin_until(lambda: len(prims) >= 2, 10, "idle primitives")
+    # no odometry yet: primitive I, the state and reason in the status (no fake costs), logged once
+    probe.spin_until(lambda: len(prims) >= 2 and len(status) >= 2, 10, "idle primitives")
     assert all(p.id == Primitive.ID_I and p.name == "I" for p in prims)
-    node.wait_for_log(r"publishing primitive I: no odometry on /test/odom", timeout=5)
+    s = status[-1]
+    assert s.state == PlannerStatus.STATE_WAITING and "no odometry on /test/odom" in s.message
+    assert math.isnan(s.total_cost) and math.isnan(s.cost_distance) and math.isnan(s.distance_to_path)
+    node.wait_for_log(r"no odometry on /test/odom yet; publishing primitive I", timeout=5)
+    assert len(node.log_text().split("no odometry on /test/odom")) == 2, "the reason is logged once"
 
     # the latched path reaches a late subscriber
     probe.node.create_subscription(PathMsg, "/frog/path", paths.append, LATCHED)
@@ -68,12 +72,12 @@ def test_decides_every_period_and_reports_idle_reasons(launch, probe, library):
     while time.monotonic() < end:
         odom_pub.publish(_odom(0.05, 0.03, 0.0))
         probe.spin_for(0.1)
-    decided = [s for s in status if s.total_cost > 0]
+    decided = [s for s in status if s.state == PlannerStatus.STATE_FOLLOWING]
     assert decided, "no decision with a cost was published"
     s = decided[-1]
     assert s.distance_to_path == pytest.approx(0.03, abs=1e-3)
     assert 0.0 < s.path_progress < 0.3
-    assert s.primitive_name == "ABCDEFGHI"[s.primitive_id]
+    assert s.primitive_name == "ABCDEFGHI"[s.primitive_id] and s.total_cost > 0
     assert prims[-1].id == s.primitive_id
 
     # non-finite odometry is rejected, the node keeps running
@@ -84,17 +88,21 @@ def test_decides_every_period_and_reports_idle_reasons(launch, probe, library):
     # stale odometry (none for > 2 periods): back to I with the reason
     prims.clear()
     probe.spin_for(2.0)
-    node.wait_for_log(r"publishing primitive I: odometry is stale", timeout=5)
+    node.wait_for_log(r"odometry is stale \(.* s old\); publishing primitive I", timeout=5)
     assert prims[-1].id == Primitive.ID_I
+    assert status[-1].state == PlannerStatus.STATE_WAITING and "stale" in status[-1].message
 
     # ~/stop and ~/start
     stop = probe.node.create_client(Trigger, "/planner_node/stop")
     start = probe.node.create_client(Trigger, "/planner_node/start")
     probe.wait_for_service(stop)
     assert probe.call(stop, Trigger.Request()).success
-    node.wait_for_log("stopped by ~/stop", timeout=5)
-    assert probe.call(start, Trigger.Request()).success
-    node.wait_for_log("started", timeout=5)
+    node.wait_for_log(r"stopped \(call ~/start\)", timeout=5)
+    status.clear()
+    probe.spin_until(lambda: status, 5, "status while stopped")
+    assert status[-1].state == PlannerStatus.STATE_IDLE
+    reply = probe.call(start, Trigger.Request())
+    assert reply.success and "following the line path" in reply.message
     assert node.stop() == 0 and node.stopped_cleanly
 
 
@@ -108,6 +116,11 @@ def test_missing_or_corrupt_library_keeps_node_up_publishing_I(launch, probe, tm
     node.wait_for_log(r"cannot use library .*bad\.npz", timeout=60)
     probe.spin_until(lambda: len(prims) >= 2, 10, "primitives")
     assert {p.id for p in prims} == {Primitive.ID_I}
+    # ~/start says why it cannot follow instead of pretending to
+    start = probe.node.create_client(Trigger, "/planner_node/start")
+    probe.wait_for_service(start)
+    reply = probe.call(start, Trigger.Request())
+    assert not reply.success and "bad.npz" in reply.message
     assert node.running()
     assert node.stop() == 0
 

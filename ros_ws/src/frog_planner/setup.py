@@ -19,7 +19,6 @@ setup(
     entry_points={
         'console_scripts': [
             'planner_node = frog_planner.nodes.planner_node:main',
-            'frog-planner-eval = frog_planner.eval_cli:main',
         ],
     },
 )

@@ -1,5 +1,8 @@
-"""Node plumbing shared by the soft-robot packages (no algorithms): parameters and main()."""
+"""Node plumbing shared by the soft-robot packages (no algorithms): parameters, clock watch, main()."""
 
-from .node_main import ConfigurationError, declare_parameters, run_node
+from .clock_watch import SimClockWatch
+from .node_main import run_node
+from .parameters import ConfigurationError, Param, declare_parameters, params_from_dataclass, undeclared_overrides
 
-__all__ = ["ConfigurationError", "declare_parameters", "run_node"]
+__all__ = ["ConfigurationError", "Param", "SimClockWatch", "declare_parameters", "params_from_dataclass",
+           "run_node", "undeclared_overrides"]

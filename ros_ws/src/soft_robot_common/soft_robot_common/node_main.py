@@ -1,8 +1,8 @@
-"""Declared, read-only parameters and a ``main()`` with clean shutdown for every node.
+"""A ``main()`` with clean shutdown, configuration errors and start-up checks for every node.
 
-Each node module keeps a table ``[(name, default, description), ...]``, calls
-:func:`declare_parameters` in ``__init__`` and raises :class:`ConfigurationError` for a
-value it cannot work with; its ``main`` is ``run_node(NodeClass, args)``.
+Each node module declares its parameters with :func:`soft_robot_common.declare_parameters`,
+raises :class:`ConfigurationError` for a value it cannot work with, and its ``main`` is
+``run_node(NodeClass, args)``.
 """
 
 from __future__ import annotations
@@ -11,47 +11,27 @@ import signal
 import sys
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 
-_TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
-          float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING,
-          list: ParameterType.PARAMETER_STRING_ARRAY}
-
-
-class ConfigurationError(ValueError):
-    """A parameter value that makes the node's job impossible (fatal at start-up: exit 2)."""
-
-
-def declare_parameters(node, table, prefix: str = "") -> dict:
-    """Declare ``(name, default, description)`` rows as typed read-only parameters.
-
-    Returns ``{name: value}`` as set on the command line or in a parameter file. A value of
-    the wrong type raises rclpy's ParameterException, which :func:`run_node` reports as a
-    configuration error.
-    """
-    values = {}
-    for name, default, description in table:
-        ptype = _TYPES[type(default)]
-        node.declare_parameter(prefix + name, default, ParameterDescriptor(
-            type=ptype, description=description, read_only=True))
-        values[name] = node.get_parameter(prefix + name).value
-    return values
+from .clock_watch import SimClockWatch
+from .parameters import ConfigurationError, undeclared_overrides
 
 
 def _raise_keyboard_interrupt(signum, frame):
     raise KeyboardInterrupt(f"signal {signum}")
 
 
-def run_node(node_class, args=None, close=None) -> int:
+def run_node(node_class, args=None, close=None, executor=None) -> int:
     """Create and spin ``node_class()`` until SIGINT/SIGTERM; return the exit code.
 
     SIGINT and SIGTERM are handled here rather than by rclpy (whose handler invalidates the
     context first), so a node can still log and publish while it shuts down. ``close``
     (optional) is called with the node before it is destroyed. A ConfigurationError or a
-    wrongly typed parameter prints one line naming the problem and returns 2.
+    wrongly typed parameter prints one line naming the problem and returns 2. ``executor``
+    (optional) makes the executor to spin with after ``rclpy.init`` (a class or factory,
+    e.g. ``MultiThreadedExecutor`` for a node that serves requests while a long solve runs).
     """
     signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
@@ -59,7 +39,12 @@ def run_node(node_class, args=None, close=None) -> int:
     node = None
     try:
         node = node_class()
-        rclpy.spin(node)
+        for name, hint in undeclared_overrides(node):
+            node.get_logger().warn(f"parameter override '{name}' is not a parameter of this node and is ignored"
+                                   + (f" (did you mean '{hint}'?)" if hint else ""))
+        if SimClockWatch.wanted(node):
+            node._sim_clock_watch = SimClockWatch(node)
+        rclpy.spin(node, executor=executor() if executor is not None else None)
     except (ConfigurationError, ParameterException) as exc:
         name = getattr(node_class, "NODE_NAME", node_class.__name__)
         print(f"[{name}] fatal configuration error: {exc}", file=sys.stderr)

@@ -16,41 +16,42 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from soft_robot_common import ConfigurationError, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
 
 from frog_logger.core.message_definitions import MessageDefinitionError, full_message_definition
 from frog_logger.core.recording import Recording, RecordingError
 
 _PARAMS = [
-    # name, default (its type is the parameter's type), description
-    ("topics", [""],
-     "topics to record; empty (or ['']) records every topic and keeps discovering new ones"),
-    ("exclude_regex", "",
-     "topics matching this regular expression are not recorded (all-topics mode)"),
-    ("include_hidden", False,
-     "also record hidden topics (a name part starting with '_')"),
-    ("output_dir", "recordings",
-     "folder for the MCAP files (created if missing)"),
-    ("file_prefix", "",
-     "file name prefix; files are <prefix>_000.mcap, ... (default rec_<date>_<time>)"),
-    ("max_file_size_mb", 0.0,
-     "start a new file past this size [MB = 1e6 bytes]; 0 = no size split"),
-    ("max_file_duration_s", 0.0,
-     "start a new file after this duration [s]; 0 = no time split"),
-    ("compression", "zstd",
-     "chunk compression: zstd, lz4, none"),
-    ("flush_period_s", 0.5,
-     "close the open chunk this often [s]: the most a SIGKILL can lose"),
-    ("discovery_period_s", 0.5,
-     "how often to look for new topics and publishers [s]"),
-    ("history", "keep_all",
-     "subscription history: keep_all (DDS buffers a backlog without loss while the "
-     "recorder is busy) or keep_last (bounded by queue_depth; old messages dropped)"),
-    ("queue_depth", 1000,
-     "subscription history depth per topic with history keep_last"),
-    ("retry_period_s", 5.0,
-     "after a write error (disk full), try a new file this often [s]"),
+    Param("topics", [""], "topics to record; empty (or ['']) records every topic and keeps discovering new "
+          "ones; relative names resolve in the recorder's namespace"),
+    Param("exclude_regex", "", "topics matching this regular expression are not recorded (all-topics mode)"),
+    Param("include_hidden", False, "also record hidden topics (a name part starting with '_')"),
+    Param("output_dir", "recordings", "folder for the MCAP files (created if missing)"),
+    Param("file_prefix", "", "file name prefix; files are <prefix>_000.mcap, ... (empty: rec_<date>_<time>)"),
+    Param("max_file_size_mb", 0.0, "start a new file past this size [MB = 1e6 bytes]; 0 = no size split",
+          min=0.0, max=1e7),
+    Param("max_file_duration_s", 0.0, "start a new file after this duration [s]; 0 = no time split", min=0.0,
+          max=1e7),
+    Param("compression", "zstd", "chunk compression", choices=("zstd", "lz4", "none")),
+    Param("flush_period_s", 0.5, "close the open chunk this often [s]: the most a SIGKILL can lose", min=0.01,
+          max=3600.0),
+    Param("discovery_period_s", 0.5, "how often to look for new topics and publishers [s]", min=0.05, max=3600.0),
+    Param("history", "keep_all", "subscription history: keep_all (DDS buffers a backlog without loss while the "
+          "recorder is busy) or keep_last (bounded by queue_depth; old messages dropped)",
+          choices=("keep_all", "keep_last")),
+    Param("queue_depth", 1000, "subscription history depth per topic with history keep_last", min=1,
+          max=1_000_000),
+    Param("retry_period_s", 5.0, "after a write error (disk full), try a new file this often [s]", min=0.1,
+          max=3600.0),
 ]
+
+
+def _check_regex(values: dict) -> str | None:
+    try:
+        re.compile(values["exclude_regex"])
+    except re.error as exc:
+        return f"exclude_regex {values['exclude_regex']!r} is not a valid regular expression: {exc}"
+    return None
 
 
 def _qos_to_dict(qos) -> dict:
@@ -110,9 +111,11 @@ class RecorderNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("recorder", **kwargs)
-        p = declare_parameters(self, _PARAMS)
-        self.topics = [t for t in (p["topics"] or []) if t]
-        self._validate(p)
+        p = declare_parameters(self, _PARAMS, validate=_check_regex)
+        try:
+            self.topics = [self.resolve_topic_name(t) for t in (p["topics"] or []) if t]
+        except Exception as exc:  # rclpy raises its own name-validation errors
+            raise ConfigurationError(f"topics: {exc}") from None
         self.include_hidden = p["include_hidden"]
         self.exclude = re.compile(p["exclude_regex"]) if p["exclude_regex"] else None
         self.queue_depth = p["queue_depth"]
@@ -136,13 +139,13 @@ class RecorderNode(Node):
             raise
 
     def _start(self) -> None:
-        p = {name: self.get_parameter(name).value for name, *_ in _PARAMS}
+        p = {row.name: self.get_parameter(row.name).value for row in _PARAMS}
         self._recorded: dict[str, object] = {}
         self._rejected: dict[str, str] = {}      # topic -> reason, logged once
         self._last_error_log = 0.0
         self._last_retry = 0.0
         self._retry_period = p["retry_period_s"]
-        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.create_timer(p["discovery_period_s"], self.discover)
         self.create_timer(p["flush_period_s"], self.flush)
         self.create_timer(1.0, self.publish_diagnostics)
@@ -150,28 +153,6 @@ class RecorderNode(Node):
             f"recording {'topics ' + ', '.join(self.topics) if self.topics else 'all topics'} "
             f"to {self.recording.current_file}")
         self.discover()
-
-    @staticmethod
-    def _validate(p: dict) -> None:
-        for key in ("flush_period_s", "discovery_period_s", "retry_period_s"):
-            if not p[key] > 0:
-                raise ConfigurationError(f"parameter {key} must be > 0, got {p[key]}")
-        for key in ("max_file_size_mb", "max_file_duration_s"):
-            if p[key] < 0:
-                raise ConfigurationError(f"parameter {key} must be >= 0, got {p[key]}")
-        if p["queue_depth"] < 1:
-            raise ConfigurationError(f"parameter queue_depth must be >= 1, got {p['queue_depth']}")
-        if p["history"] not in ("keep_all", "keep_last"):
-            raise ConfigurationError(
-                f"parameter history must be keep_all or keep_last, got {p['history']!r}")
-        if p["compression"] not in ("zstd", "lz4", "none"):
-            raise ConfigurationError(
-                f"parameter compression must be zstd, lz4 or none, got {p['compression']!r}")
-        try:
-            re.compile(p["exclude_regex"])
-        except re.error as exc:
-            raise ConfigurationError(f"parameter exclude_regex is not a valid regular "
-                                     f"expression: {exc}") from exc
 
     # -- discovery ---------------------------------------------------------------------
     def _wanted(self, topic: str) -> bool:

@@ -99,12 +99,27 @@ class MotionLibrary:
     def transitions_at(self, period):
         """Transitions after one period T (paper eq. 14 with t_f = T).
 
+        On the sample grid the stored sample is returned; between two samples (e.g. the
+        hardware's measured 1.43 s period on a 0.05 s grid) the two nearest samples are
+        interpolated linearly. Between samples the body only coasts (a kick is over within
+        0.2 s), so the error is second order in the interval (see the tests).
+
         Returns
         -------
         numpy.ndarray, shape (P, N, 6), float64
             Units as ``transitions``.
         """
-        return np.asarray(self.transitions[:, :, self.time_index(period), :], dtype=float)
+        period = float(period)
+        try:
+            return np.asarray(self.transitions[:, :, self.time_index(period), :], dtype=float)
+        except ValueError:
+            if not (period > 0.0 and period <= self.horizon + _TIME_TOLERANCE_S):
+                raise
+        lo = int(np.searchsorted(self.times, period)) - 1
+        w = (period - self.times[lo]) / (self.times[lo + 1] - self.times[lo])
+        a = np.asarray(self.transitions[:, :, lo, :], dtype=float)
+        b = np.asarray(self.transitions[:, :, lo + 1, :], dtype=float)
+        return (1.0 - w) * a + w * b
 
 
 def _text(value):

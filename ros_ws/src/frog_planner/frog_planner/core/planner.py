@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .settings import PlannerSettings
 from .transition_model import world_to_body_velocity
 from .tree_search import MAX_DEPTH, CostWeights, path_cost, search
 
@@ -85,20 +86,21 @@ class Decision:
     yaw_rate_cost: float = 0.0
 
 
+_DEFAULTS = PlannerSettings()
+
 #: Default heading look-ahead [m]: chosen on the DER simulator (see ``Planner``).
-DEFAULT_HEADING_LOOKAHEAD = 0.1
+DEFAULT_HEADING_LOOKAHEAD = _DEFAULTS.heading_lookahead
 
 #: Default velocity look-ahead [s]: chosen on the DER simulator (see ``Planner``).
-DEFAULT_VELOCITY_LOOKAHEAD = 1.5
+DEFAULT_VELOCITY_LOOKAHEAD = _DEFAULTS.velocity_lookahead
 
 #: Below this planar speed [m/s] and yaw rate [rad/s] the robot counts as standing still.
-DEFAULT_STALL_SPEED = 0.002
+DEFAULT_STALL_SPEED = _DEFAULTS.stall_speed
 STALL_YAW_RATE = 0.01
 
 #: Keyword arguments of :class:`Planner` that give the paper's exact cost: eq. 19 at the leaf
 #: with the paper's weights and the heading error against the path tangent.
-PAPER_COST = {"weights": CostWeights(), "heading_lookahead": 0.0, "velocity_lookahead": 0.0,
-              "yaw_rate_weight": 0.0, "stall_speed": 0.0}
+PAPER_COST = {k: v for k, v in PlannerSettings.paper().planner_kwargs().items() if k != "depth"}
 
 
 def _vector(value, name, unit):

@@ -2,11 +2,13 @@
 
 Runs :class:`frog_sim.core.simulation.FrogSimulation` paced against the wall clock
 (``real_time_factor``; 0 = as fast as possible), publishes the ground truth on
-``/frog/sim/odom`` (nav_msgs/Odometry: COM pose in ``tank``, body-frame twist in ``frog``)
-and the rod network on ``/frog/sim/shape`` (visualization_msgs/Marker, LINE_LIST), and
-executes primitives (``/frog/primitive``) and limb activations (``/frog/limb_activation``).
-With ``publish_clock`` it also publishes ``/clock`` (sim time) so other nodes can run with
-``use_sim_time`` faster than real time.
+``frog/sim/odom`` (nav_msgs/Odometry: COM pose in ``tank``, body-frame twist in ``frog``)
+and the rod network on ``frog/sim/shape`` (visualization_msgs/Marker, LINE_LIST), and
+executes primitives (``frog/primitive``) and limb activations (``frog/limb_activation``); topic names are relative,
+so ``__ns`` puts a second simulator beside the first.
+With ``publish_clock`` it also publishes ``/clock`` (simulated time, monotonic across
+``~/reset``) and stamps everything with it, so other nodes can run with ``use_sim_time``
+faster than real time; otherwise stamps come from the node's ROS clock (system time).
 """
 
 from __future__ import annotations
@@ -18,12 +20,12 @@ import time
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point
+from geometry_msgs.msg import Point, TransformStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from soft_robot_common import ConfigurationError, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
@@ -32,30 +34,49 @@ from frog_sim.core.schedules import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import DEFAULT_TIME_STEP, ConvergenceError, FrogSimulation
 
 _NODE_PARAMS = [
-    # name, default, description
-    ("real_time_factor", 1.0, "simulated seconds per wall second; 0 = as fast as possible"),
-    ("publish_clock", False, "publish /clock with the simulated time (for use_sim_time nodes)"),
-    ("time_step", DEFAULT_TIME_STEP, "integrator time step dt [s]"),
-    ("odom_rate_hz", 50.0, "rate of /frog/sim/odom in simulated time [Hz]"),
-    ("shape_rate_hz", 10.0, "rate of /frog/sim/shape in simulated time [Hz]"),
-    ("odom_alias_topic", "", "also publish the ground truth here (e.g. /frog/odom for a "
-                             "vision-free loop); empty = off"),
-    ("world_frame", "tank", "frame of poses (REP-105 world/odom frame)"),
-    ("body_frame", "frog", "robot body frame, x forward"),
-    ("initial_x", 0.0, "initial centre-of-mass x [m]"),
-    ("initial_y", 0.0, "initial centre-of-mass y [m]"),
-    ("initial_heading", 0.0, "initial heading [rad]"),
-    ("gait_frequency_hz", 0.0, "swim a periodic gait at this frequency from the start "
-                               "(must be a measured frequency for the EGaIn ratio); 0 = no gait"),
-    ("gait_phase_offset", 0.5, "rear-pair delay as a fraction of the gait cycle, [0, 1)"),
-    ("gait_duration_s", 0.0, "stop the gait after this long [s]; 0 = forever"),
-    ("duration_s", 0.0, "stop simulating (keep publishing the last state) after this simulated "
-                        "time [s]; 0 = run forever"),
+    Param("real_time_factor", 1.0, "simulated seconds per wall second; 0 = as fast as possible", min=0.0,
+          max=1000.0, live=True),
+    Param("publish_clock", False, "publish /clock with the simulated time (for use_sim_time nodes); the "
+          "stamps are then simulated time too"),
+    Param("time_step", DEFAULT_TIME_STEP, "integrator time step dt [s]", min=1e-5, max=0.01),
+    Param("odom_rate_hz", 50.0, "rate of frog/sim/odom in simulated time [Hz]", min=0.1, max=1000.0),
+    Param("shape_rate_hz", 10.0, "rate of frog/sim/shape in simulated time [Hz]", min=0.1, max=200.0),
+    Param("execute_primitives", True, "execute frog/primitive directly; false when a robot (emulator) fires the "
+          "limbs through frog/limb_activation, as in the digital twin"),
+    Param("odom_alias_topic", "", "also publish the ground truth here (e.g. frog/odom for a vision-free "
+          "loop); empty = off"),
+    Param("world_frame", "tank", "frame of poses (REP-105 world/odom frame)"),
+    Param("body_frame", "frog", "robot body frame of the odometry's twist, x forward"),
+    Param("publish_tf", True, "publish the true pose on tf as world_frame -> tf_frame (with the odometry)"),
+    Param("tf_frame", "frog_true", "child frame of the true pose on tf (the tracker publishes world -> frog)"),
+    Param("initial_x", 0.0, "initial centre-of-mass x [m]", min=-1e3, max=1e3),
+    Param("initial_y", 0.0, "initial centre-of-mass y [m]", min=-1e3, max=1e3),
+    Param("initial_heading", 0.0, "initial heading [rad]", min=-2 * math.pi, max=2 * math.pi),
+    Param("gait_frequency_hz", 0.0, "swim a periodic gait at this frequency from the start (within the "
+          "measured frequencies for the EGaIn ratio); 0 = no gait", min=0.0, max=5.0),
+    Param("gait_phase_offset", 0.5, "rear-pair delay as a fraction of the gait cycle, [0, 1)", min=0.0,
+          max=0.999),
+    Param("gait_duration_s", 0.0, "stop the gait after this long [s]; 0 = forever", min=0.0, max=1e6),
+    Param("duration_s", 0.0, "stop simulating (keep publishing the last state) after this simulated time "
+          "[s]; 0 = run forever", min=0.0, max=1e7),
 ]
 
-# Physical settings: every scalar field of FrogParameters becomes parameter "model.<field>".
+# Physical settings: every scalar field of FrogParameters becomes parameter "model.<field>",
+# with the range and unit its metadata gives (frog_sim/core/model_parameters.py).
 _MODEL_FIELDS = [f for f in dataclasses.fields(FrogParameters)
                  if f.type in ("float", "int", "str", float, int, str)]
+
+
+def _model_params(defaults: FrogParameters) -> list:
+    rows = []
+    for f in _MODEL_FIELDS:
+        lo, hi = f.metadata.get("range", (None, None))
+        unit = f.metadata.get("unit", "")
+        choices = f.metadata.get("choices")
+        rows.append(Param(f.name, getattr(defaults, f.name),
+                          f"FrogParameters.{f.name}{' [' + unit + ']' if unit not in ('', '-') else ''} (see "
+                          f"frog_sim/core/model_parameters.py)", lo, hi, tuple(choices) if choices else None))
+    return rows
 
 
 def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
@@ -71,13 +92,9 @@ class SimNode(Node):
     def __init__(self, **kwargs):
         super().__init__("sim_node", **kwargs)
         defaults = FrogParameters()
-        p = declare_parameters(self, _NODE_PARAMS)
+        p = declare_parameters(self, _NODE_PARAMS, on_change=self.on_parameters)
         self.cfg = p
-        model = declare_parameters(self, [
-            (f.name, getattr(defaults, f.name),
-             f"FrogParameters.{f.name} (SI; see frog_sim/core/model_parameters.py)")
-            for f in _MODEL_FIELDS], prefix="model.")
-        self._validate(p)
+        model = declare_parameters(self, _model_params(defaults), prefix="model.")
         try:
             params = defaults.replace(**model)
             self.sim = FrogSimulation(params, time_step=p["time_step"])
@@ -89,19 +106,32 @@ class SimNode(Node):
             raise ConfigurationError(str(exc)) from exc
 
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        self.odom_pub = self.create_publisher(Odometry, "/frog/sim/odom", qos)
+        self.odom_pub = self.create_publisher(Odometry, "frog/sim/odom", qos)
         self.alias_pub = (self.create_publisher(Odometry, p["odom_alias_topic"], qos)
                           if p["odom_alias_topic"] else None)
-        self.shape_pub = self.create_publisher(Marker, "/frog/sim/shape", qos)
+        self.shape_pub = self.create_publisher(Marker, "frog/sim/shape", qos)
+        # /clock is global by ROS convention (use_sim_time nodes listen there)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10) if p["publish_clock"] else None
-        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.tf_pub = None
+        if p["publish_tf"]:
+            try:
+                from tf2_msgs.msg import TFMessage
+            except ImportError:
+                self.get_logger().warning("tf2_msgs is not installed: not publishing tf (build the workspace "
+                                          "with ./dev, which provides it, or install ros-jazzy-tf2-msgs)")
+            else:
+                self._TFMessage = TFMessage
+                self.tf_pub = self.create_publisher(TFMessage, "tf", 100)
         from soft_robot_interfaces.msg import LimbActivation, Primitive
-        self.create_subscription(Primitive, "/frog/primitive", self.on_primitive, qos)
-        self.create_subscription(LimbActivation, "/frog/limb_activation", self.on_activation, qos)
+        if p["execute_primitives"]:
+            self.create_subscription(Primitive, "frog/primitive", self.on_primitive, qos)
+        self.create_subscription(LimbActivation, "frog/limb_activation", self.on_activation, qos)
         self.create_service(Trigger, "~/reset", self.on_reset)
 
-        # Stamps: sim time when /clock is published, else wall time at start + sim time.
-        self.stamp_offset_ns = 0 if self.clock_pub else time.time_ns()
+        # One time source: with publish_clock the node *is* the clock (simulated world time,
+        # continuing across ~/reset); otherwise stamps come from the node's ROS clock.
+        self.world_time_offset = 0.0      # simulated time before the last reset [s]
         self.odom_period = 1.0 / p["odom_rate_hz"]
         self.shape_period = 1.0 / p["shape_rate_hz"]
         self.next_odom = 0.0
@@ -119,24 +149,10 @@ class SimNode(Node):
             f"{params.egain_vol_pct:g} %, dt {self.sim.time_step * 1e3:g} ms, real-time factor "
             f"{p['real_time_factor']:g}{', gait %.2f Hz' % p['gait_frequency_hz'] if p['gait_frequency_hz'] else ''})")
 
-    @staticmethod
-    def _validate(p: dict) -> None:
-        checks = [
-            ("real_time_factor", p["real_time_factor"] >= 0, ">= 0"),
-            ("time_step", 0 < p["time_step"] <= 0.01, "in (0, 0.01] s"),
-            ("odom_rate_hz", 0 < p["odom_rate_hz"] <= 1000, "in (0, 1000] Hz"),
-            ("shape_rate_hz", 0 < p["shape_rate_hz"] <= 200, "in (0, 200] Hz"),
-            ("gait_frequency_hz", p["gait_frequency_hz"] >= 0, ">= 0"),
-            ("gait_phase_offset", 0 <= p["gait_phase_offset"] < 1, "in [0, 1)"),
-            ("gait_duration_s", p["gait_duration_s"] >= 0, ">= 0"),
-            ("duration_s", p["duration_s"] >= 0, ">= 0"),
-        ]
-        for name, ok, expected in checks:
-            if not ok or (isinstance(p[name], float) and not math.isfinite(p[name])):
-                raise ConfigurationError(f"parameter {name} = {p[name]!r} must be {expected}")
-        for name in ("initial_x", "initial_y", "initial_heading"):
-            if not math.isfinite(p[name]):
-                raise ConfigurationError(f"parameter {name} = {p[name]!r} must be finite")
+    def on_parameters(self, changed: dict) -> None:
+        if "real_time_factor" in changed:
+            # re-anchor the pacing so the new rate applies from now on, without a jump
+            self.wall_start, self.sim_start = time.monotonic(), self.sim.time
 
     # -- simulation loop -----------------------------------------------------------------
     def _target_time(self) -> float:
@@ -167,9 +183,15 @@ class SimNode(Node):
             self.steps_total += n
             self.publish_state()
 
+    @property
+    def world_time(self) -> float:
+        """Simulated time since the node started [s], monotonic across ~/reset."""
+        return self.world_time_offset + self.sim.time
+
     def _stamp(self) -> Time:
-        ns = self.stamp_offset_ns + int(round(self.sim.time * 1e9))
-        sec, nanosec = divmod(ns, 1_000_000_000)
+        if self.clock_pub is None:
+            return self.get_clock().now().to_msg()
+        sec, nanosec = divmod(int(round(self.world_time * 1e9)), 1_000_000_000)
         return Time(sec=sec, nanosec=nanosec)
 
     def publish_state(self, force: bool = False) -> None:
@@ -201,6 +223,14 @@ class SimNode(Node):
         self.odom_pub.publish(msg)
         if self.alias_pub is not None:
             self.alias_pub.publish(msg)
+        if self.tf_pub is not None:
+            tf = TransformStamped()
+            tf.header = msg.header
+            tf.child_frame_id = self.cfg["tf_frame"]
+            tf.transform.translation.x = msg.pose.pose.position.x
+            tf.transform.translation.y = msg.pose.pose.position.y
+            tf.transform.rotation = msg.pose.pose.orientation
+            self.tf_pub.publish(self._TFMessage(transforms=[tf]))
 
     def publish_shape(self) -> None:
         pos = self.sim.node_positions
@@ -229,7 +259,7 @@ class SimNode(Node):
             return
         if self.error is None:
             self.sim.execute_primitive(name)
-            self.get_logger().info(f"primitive {name} at t = {self.sim.time:.3f} s")
+            self.get_logger().debug(f"primitive {name} at t = {self.sim.time:.3f} s")
 
     def on_activation(self, msg) -> None:
         limbs = list(msg.limbs)
@@ -247,6 +277,8 @@ class SimNode(Node):
 
     def on_reset(self, request, response):
         p = self.cfg
+        # the reset state is one step after the last state published: stamps strictly increase
+        self.world_time_offset += self.sim.time + self.sim.time_step
         self.sim.reset()
         self.sim.set_pose(p["initial_x"], p["initial_y"], p["initial_heading"])
         if p["gait_frequency_hz"] > 0:
@@ -257,6 +289,7 @@ class SimNode(Node):
         self.wall_start, self.sim_start = time.monotonic(), self.sim.time
         self.publish_state(force=True)
         response.success, response.message = True, "simulation reset to the initial pose"
+        self.get_logger().info(f"reset to the initial pose at world time {self.world_time:.3f} s")
         return response
 
     def publish_diagnostics(self) -> None:

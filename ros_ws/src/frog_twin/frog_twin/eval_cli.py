@@ -6,8 +6,11 @@ import argparse
 import json
 import sys
 
-import numpy as np
 from pathlib import Path
+
+import numpy as np
+
+from frog_planner.core.settings import PlannerSettings, add_arguments, from_arguments
 
 EPILOG = """examples:
   frog-planner-eval --library runs/library/default.npz --path all --out runs/eval
@@ -23,20 +26,18 @@ a metrics.json summary into --out.
 
 
 def _run(args, path_name, depth, metric, model_cache):
+    import dataclasses
+
     from frog_planner.core.transition_model import TransitionModel
-    from frog_planner.core.tree_search import CostWeights
-    from frog_planner.evaluation import PATHS, run_closed_loop, save_result
-    key = (metric, args.k)
+    from frog_twin.core.evaluation import PATHS, run_closed_loop, save_result
+    settings = dataclasses.replace(args.settings, depth=depth, metric=metric)
+    key = (metric, settings.k_neighbours)
     if key not in model_cache:
-        model_cache[key] = TransitionModel.load(args.library, period=args.period, metric=metric,
-                                                k=args.k, gradient_correction=args.gradient_correction)
+        model_cache[key] = TransitionModel.load(args.library, **settings.model_kwargs())
     path = PATHS[path_name]()
-    res = run_closed_loop(path, model_cache[key], depth=depth, period=args.period,
-                          weights=CostWeights(args.w_a, args.w_b, args.w_c),
+    res = run_closed_loop(path, model_cache[key], period=settings.period,
                           start_offset=(0.0, args.lateral_offset, 0.0), max_time=args.max_time,
-                          heading_lookahead=args.heading_lookahead,
-                          velocity_lookahead=args.velocity_lookahead, yaw_rate_weight=args.w_r,
-                          transitions=args.transitions, stall_speed=args.stall_speed)
+                          transitions=args.transitions, **settings.planner_kwargs())
     files = save_result(res, args.out)
     m = res.metrics
     print(f"{path_name:8s} depth {depth} {metric:9s}: goal {'yes' if m['goal_reached'] else 'NO '} "
@@ -51,29 +52,10 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--library", type=Path, required=True, help="motion library (.npz)")
     ap.add_argument("--path", choices=["line", "sine", "ellipse", "all"], default="all")
-    ap.add_argument("--depth", type=int, default=1)
-    ap.add_argument("--metric", choices=["euclidean", "relative"], default="euclidean")
-    ap.add_argument("--k", type=int, default=1, help="nearest neighbours averaged")
-    ap.add_argument("--gradient-correction", action=argparse.BooleanOptionalAction, default=True,
-                    help="correct the nearest state's transitions to first order for the query's velocity "
-                         "difference (library-fitted slopes); --no-gradient-correction = paper")
-    ap.add_argument("--period", type=float, default=1.5, help="primitive period T [s]")
-    ap.add_argument("--w-a", type=float, default=500.0)
-    ap.add_argument("--w-b", type=float, default=50.0)
-    ap.add_argument("--w-c", type=float, default=300.0)
-    ap.add_argument("--heading-lookahead", type=float, default=0.1,
-                    help="heading error against the path this far ahead [m] (default 0.1; 0 = paper's tangent)")
+    add_arguments(ap, PlannerSettings)
     ap.add_argument("--paper-cost", action="store_true",
                     help="the paper's exact planner: eq. 19 at the leaf, tangent heading, weights 500/50/300, "
                          "nearest-state transitions (overrides the weight, look-ahead and correction options)")
-    ap.add_argument("--velocity-lookahead", type=float, default=1.5,
-                    help="cost each leaf extrapolated by its predicted velocities over this time [s] "
-                         "(default 1.5; 0 = paper: cost at the predicted pose)")
-    ap.add_argument("--w-r", type=float, default=0.0,
-                    help="weight per rad/s of |yaw rate - path curvature x speed| at the leaf (0 = paper)")
-    ap.add_argument("--stall-speed", type=float, default=0.002,
-                    help="standing still (below this speed [m/s]) short of the goal, never choose 'no action' "
-                         "(it would wait forever); 0 = the paper")
     ap.add_argument("--transitions", choices=["library", "simulator"], default="library",
                     help="predictions of the search: the library (paper) or exact ones from copies of the "
                          "running simulator (depth <= 2; about 9^depth simulated periods per decision)")
@@ -85,34 +67,38 @@ def main(argv=None) -> int:
     ap.add_argument("--compare", action="store_true", help="depths 1-3 x both metrics on every path")
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args(argv)
-    if args.paper_cost:
-        args.w_a, args.w_b, args.w_c = 500.0, 50.0, 300.0
-        args.heading_lookahead = args.velocity_lookahead = args.w_r = args.stall_speed = 0.0
-        args.gradient_correction = False
+    try:
+        args.settings = from_arguments(PlannerSettings, args)
+        if args.paper_cost:
+            args.settings = PlannerSettings.paper(period=args.settings.period, depth=args.settings.depth,
+                                                  metric=args.settings.metric,
+                                                  k_neighbours=args.settings.k_neighbours)
+    except ValueError as exc:
+        ap.error(str(exc))
     from frog_planner.core.library_file import LibraryFormatError
     paths = ["line", "sine", "ellipse"] if args.path == "all" or args.compare else [args.path]
     if args.compare and args.transitions == "simulator":
-        runs = [(p, d, args.metric) for d in (1, 2) for p in paths]
+        runs = [(p, d, args.settings.metric) for d in (1, 2) for p in paths]
     elif args.compare:
         runs = [(p, d, m) for m in ("euclidean", "relative") for d in (1, 2, 3) for p in paths]
     else:
-        runs = [(p, args.depth, args.metric) for p in paths]
+        runs = [(p, args.settings.depth, args.settings.metric) for p in paths]
     cache: dict = {}
     try:
         results = [_run(args, *r, cache) for r in runs]
     except (LibraryFormatError, ValueError, OSError) as exc:
         print(f"frog-planner-eval: error: {exc}", file=sys.stderr)
         return 2
-    from frog_planner.evaluation import PATHS, path_min_radius
+    from frog_twin.core.evaluation import PATHS, path_min_radius
     for r in results:
         r["path_min_radius_m"] = path_min_radius(PATHS[{"sinusoid": "sine"}.get(r["path"], r["path"])]())
     if args.turning:
-        from frog_planner.evaluation import turning_response
+        from frog_twin.core.evaluation import turning_response
         print("\nturning response, each primitive repeated every period from rest for 45 s:")
         print(f"  {'prim':4s} {'steady COM circle cm':>20} {'speed cm/s':>10} {'yaw deg/s':>9} "
               f"{'63% yaw after s':>15} {'max side-slip deg':>17}")
         for prim in ("E", "G", "C"):
-            tr = turning_response(prim, period=args.period)
+            tr = turning_response(prim, period=args.settings.period)
             print(f"  {prim:4s} {100 * tr.steady_radius:20.1f} {100 * tr.steady_speed:10.2f} "
                   f"{np.degrees(tr.steady_yaw_rate):9.1f} {tr.rise_time:15.1f} {np.degrees(tr.max_course_lag):17.0f}")
         for name in paths:

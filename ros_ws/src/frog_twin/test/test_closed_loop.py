@@ -12,7 +12,7 @@ import pytest
 from frog_planner.core.paths import line_path, parametric_path
 from frog_planner.core.transition_model import TransitionModel
 from frog_planner.core.tree_search import CostWeights
-from frog_planner.evaluation import run_closed_loop
+from frog_twin.core.evaluation import run_closed_loop
 
 PERIOD = 1.5
 
@@ -115,7 +115,7 @@ def test_turning_response_mirrors_and_matches_its_own_track():
     radius agrees with speed / yaw rate of a steady circle; the yaw rate takes periods to
     build up. Path radii are checked against their closed forms."""
     from frog_planner.core.paths import ellipse_path, sinusoid_path
-    from frog_planner.evaluation import path_min_radius, turning_response
+    from frog_twin.core.evaluation import path_min_radius, turning_response
 
     e = turning_response("E", period=PERIOD)
     f = turning_response("F", period=PERIOD)

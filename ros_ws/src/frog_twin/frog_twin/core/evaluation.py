@@ -1,7 +1,7 @@
 """Closed-loop evaluation in one process: DER simulator + library planner (paper Fig. 5, S3).
 
-Not part of the core: it joins this package's planner core with the frog_sim simulator
-(the two cores stay independent; this module is where they meet, like the ROS graph).
+It joins frog_planner's planner core with frog_sim's simulator; the two cores stay
+independent and meet here, in the composition package, as they meet in the ROS graph.
 Every period T the planner sees the simulator's rigid-body state (ground truth), picks a
 primitive, and the simulator executes it for T seconds.
 """
@@ -24,6 +24,8 @@ from frog_planner.core.planner import (DEFAULT_HEADING_LOOKAHEAD, DEFAULT_STALL_
                                       Planner)
 from frog_planner.core.transition_model import TransitionModel
 from frog_planner.core.tree_search import CostWeights
+
+from .metrics import samples_before_finish  # noqa: F401  (re-exported for callers of this module)
 
 PATHS = {"line": line_path, "sine": sinusoid_path, "ellipse": ellipse_path}
 
@@ -272,22 +274,6 @@ def path_min_radius(path: Path) -> float:
     """Smallest radius of curvature of the path [m] (inf for a straight line)."""
     k = np.abs(path.curvature_at(np.linspace(0.0, 1.0, 2001)))
     return float(1.0 / k.max()) if k.max() > 0 else float("inf")
-
-
-def samples_before_finish(positions, path_points) -> int:
-    """Number of samples before the robot crosses the finish line (the normal to the path
-    at its end) on its final approach: past it, the distance to the polyline measures
-    overshoot beyond the goal, not tracking. The final approach starts once the nearest
-    path point has been in the second half of the path (so a closed-ish path's start,
-    next to its end, does not count)."""
-    pts = np.asarray(positions, dtype=float)
-    ref = np.asarray(path_points, dtype=float)
-    nearest = np.argmin(np.linalg.norm(pts[:, None, :] - ref[None], axis=-1), axis=1)
-    half_done = np.maximum.accumulate(nearest >= len(ref) // 2)
-    tangent = ref[-1] - ref[-2]
-    past = half_done & (nearest >= len(ref) - 3) & ((pts - ref[-1]) @ tangent > 0)
-    hits = np.nonzero(past)[0]
-    return int(hits[0]) if len(hits) else len(pts)
 
 
 def plot_run(result: ClosedLoopResult, png) -> None:

@@ -1,0 +1,1 @@
+"""Composition of the frog packages: the digital twin, the in-process evaluator, shared metrics and plots."""

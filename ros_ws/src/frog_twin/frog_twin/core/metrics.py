@@ -1,0 +1,137 @@
+"""Metrics of a closed-loop run, computed from recorded samples alone (SI units).
+
+Used by the in-process evaluator, the main job and the twin alike, so a figure means the
+same wherever it is printed. Nothing here knows about the planner's own bookkeeping: the
+distance is pure geometry against the reference polyline, so a planner bug cannot hide in
+its own progress estimate.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+
+
+def distance_to_polyline(points, path) -> np.ndarray:
+    """Euclidean distance [m] of each point (N, 2) to the polyline ``path`` (M, 2), M >= 2."""
+    p = np.asarray(points, dtype=float).reshape(-1, 2)[:, None, :]
+    ref = np.asarray(path, dtype=float)
+    a, d = ref[:-1], np.diff(ref, axis=0)
+    t = np.clip(((p - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0.0, 1.0)
+    return np.min(np.linalg.norm(a + t[..., None] * d - p, axis=-1), axis=1)
+
+
+def samples_before_finish(positions, path_points) -> int:
+    """Number of samples before the robot crosses the finish line (the normal to the path
+    at its end) on its final approach: past it, the distance to the polyline measures
+    overshoot beyond the goal, not tracking. The final approach starts once the nearest
+    path point has been in the second half of the path (so a closed-ish path's start,
+    next to its end, does not count)."""
+    pts = np.asarray(positions, dtype=float)
+    ref = np.asarray(path_points, dtype=float)
+    nearest = np.argmin(np.linalg.norm(pts[:, None, :] - ref[None], axis=-1), axis=1)
+    half_done = np.maximum.accumulate(nearest >= len(ref) // 2)
+    tangent = ref[-1] - ref[-2]
+    past = half_done & (nearest >= len(ref) - 3) & ((pts - ref[-1]) @ tangent > 0)
+    hits = np.nonzero(past)[0]
+    return int(hits[0]) if len(hits) else len(pts)
+
+
+def arc_length_progress(points, path) -> np.ndarray:
+    """Arc length [m] along ``path`` of each point's closest point (no monotonicity imposed)."""
+    ref = np.asarray(path, dtype=float)
+    seg = np.diff(ref, axis=0)
+    seg_len = np.linalg.norm(seg, axis=1)
+    cum = np.r_[0.0, np.cumsum(seg_len)]
+    p = np.asarray(points, dtype=float).reshape(-1, 2)[:, None, :]
+    t = np.clip(((p - ref[:-1]) * seg).sum(-1) / np.maximum(seg_len ** 2, 1e-300), 0.0, 1.0)
+    dist = np.linalg.norm(ref[:-1] + t[..., None] * seg - p, axis=-1)
+    k = np.argmin(dist, axis=1)
+    return cum[k] + t[np.arange(len(k)), k] * seg_len[k]
+
+
+def tracking_metrics(time, positions, path, goal_time=None, primitives=()) -> dict:
+    """Mean/max distance to the path, completion time, speed along the path, primitives used.
+
+    Parameters
+    ----------
+    time : array_like, shape (N,)
+        Sample times [s], increasing; the run starts at ``time[0]``.
+    positions : array_like, shape (N, 2)
+        True positions [m] in the path's frame.
+    path : array_like, shape (M, 2)
+        Reference polyline [m].
+    goal_time : float, optional
+        When the goal was reached [s] (same clock as ``time``); None if it was not.
+    primitives : iterable of str
+        Names of the primitives sent, one per decision ('I' counts as no action).
+
+    Returns
+    -------
+    dict
+        ``mean_distance_m``, ``max_distance_m`` (samples up to the goal or the finish line),
+        ``completion_time_s`` (None without a goal), ``final_progress`` (0-1, by arc length of
+        the last sample's closest point), ``mean_speed_along_path_m_per_s`` (arc length
+        covered / elapsed time), ``primitives_used`` (counts, 'I' excluded).
+    """
+    t = np.asarray(time, dtype=float)
+    xy = np.asarray(positions, dtype=float).reshape(-1, 2)
+    ref = np.asarray(path, dtype=float)
+    if len(t) != len(xy) or len(t) < 2:
+        raise ValueError(f"need >= 2 samples with one time each, got {len(t)} times and {len(xy)} positions")
+    keep = np.ones(len(t), dtype=bool)
+    if goal_time is not None:
+        keep &= t <= goal_time + 1e-9
+    n = samples_before_finish(xy[keep], ref)
+    t, xy = t[keep][:max(n, 1)], xy[keep][:max(n, 1)]
+    dist = distance_to_polyline(xy, ref)
+    length = float(np.sum(np.linalg.norm(np.diff(ref, axis=0), axis=1)))
+    s = arc_length_progress(xy, ref)
+    end = (goal_time if goal_time is not None else t[-1]) - float(np.asarray(time, dtype=float)[0])
+    covered = length if goal_time is not None else float(s[-1] - s[0])
+    return {
+        "mean_distance_m": float(dist.mean()), "max_distance_m": float(dist.max()),
+        "completion_time_s": float(end) if goal_time is not None else None,
+        "final_progress": 1.0 if goal_time is not None else float(s[-1] / length),
+        "mean_speed_along_path_m_per_s": covered / end if end > 0 else 0.0,
+        "primitives_used": dict(sorted(Counter(p for p in primitives if p != "I").items())),
+        "path_length_m": length,
+    }
+
+
+def pose_errors(est_time, est_pose, true_time, true_pose) -> dict:
+    """Errors of estimated poses (x, y, heading) against the truth interpolated at their times.
+
+    Headings are unwrapped before interpolation and errors wrapped to [-pi, pi). Estimates
+    outside the truth's time span are ignored.
+    """
+    te, pe = np.asarray(est_time, dtype=float), np.asarray(est_pose, dtype=float).reshape(-1, 3)
+    tt, pt = np.asarray(true_time, dtype=float), np.asarray(true_pose, dtype=float).reshape(-1, 3)
+    inside = (te >= tt[0]) & (te <= tt[-1])
+    te, pe = te[inside], pe[inside]
+    if len(te) == 0:
+        raise ValueError("no estimate lies within the ground truth's time span")
+    x = np.interp(te, tt, pt[:, 0])
+    y = np.interp(te, tt, pt[:, 1])
+    h = np.interp(te, tt, np.unwrap(pt[:, 2]))
+    pos = np.hypot(pe[:, 0] - x, pe[:, 1] - y)
+    head = np.abs((pe[:, 2] - h + np.pi) % (2 * np.pi) - np.pi)
+    return {"n": int(len(te)), "position_mean_m": float(pos.mean()), "position_max_m": float(pos.max()),
+            "heading_mean_rad": float(head.mean()), "heading_max_rad": float(head.max()),
+            "position_error_m": pos, "heading_error_rad": head, "time_s": te}
+
+
+def latency_stats(sent_times, fired_times) -> dict:
+    """Median / p99 / max of (fired - sent) [s], pairing each firing with the latest send before it."""
+    sent = np.sort(np.asarray(sent_times, dtype=float))
+    fired = np.asarray(fired_times, dtype=float)
+    if len(sent) == 0 or len(fired) == 0:
+        return {"n": 0, "median_s": None, "p99_s": None, "max_s": None}
+    k = np.searchsorted(sent, fired, side="right") - 1
+    ok = k >= 0
+    lat = fired[ok] - sent[k[ok]]
+    if len(lat) == 0:
+        return {"n": 0, "median_s": None, "p99_s": None, "max_s": None}
+    return {"n": int(len(lat)), "median_s": float(np.median(lat)), "p99_s": float(np.percentile(lat, 99)),
+            "max_s": float(lat.max())}

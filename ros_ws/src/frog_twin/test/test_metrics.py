@@ -1,0 +1,62 @@
+"""Run metrics against hand-made trajectories whose figures are known by construction of geometry."""
+
+import math
+
+import numpy as np
+import pytest
+
+from frog_twin.core.metrics import distance_to_polyline, latency_stats, pose_errors, tracking_metrics
+
+
+def test_distance_to_a_polyline_is_geometry():
+    path = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    pts = np.array([[0.5, 0.2], [1.3, 0.5], [-0.3, -0.4], [2.0, 2.0], [0.9, 0.05]])
+    expected = [0.2, 0.3, 0.5, math.hypot(1.0, 1.0), 0.05]
+    assert distance_to_polyline(pts, path) == pytest.approx(expected, abs=1e-12)
+
+
+def test_tracking_metrics_of_a_constant_offset_run():
+    """2 cm left of a 0.6 m line at 2 cm/s, goal at t = 30 s: mean = max = 2 cm, 2 cm/s."""
+    path = np.c_[np.linspace(0, 0.6, 100), np.zeros(100)]
+    t = np.linspace(0.0, 40.0, 801)
+    xy = np.c_[np.minimum(0.02 * t, 0.65), np.full_like(t, 0.02)]
+    prims = ["B"] * 20 + ["I"]
+    m = tracking_metrics(t, xy, path, goal_time=30.0, primitives=prims)
+    assert m["mean_distance_m"] == pytest.approx(0.02, abs=1e-9)
+    assert m["max_distance_m"] == pytest.approx(0.02, abs=1e-9)
+    assert m["completion_time_s"] == pytest.approx(30.0)
+    assert m["mean_speed_along_path_m_per_s"] == pytest.approx(0.6 / 30.0)
+    assert m["primitives_used"] == {"B": 20}
+
+
+def test_tracking_metrics_without_goal_and_a_growing_error():
+    """Drifting away linearly: y = 0.001 t for 10 s -> mean 5 mm, max 10 mm, half-way progress."""
+    path = np.c_[np.linspace(0, 0.2, 50), np.zeros(50)]
+    t = np.linspace(0.0, 10.0, 1001)
+    xy = np.c_[0.01 * t, 0.001 * t]
+    m = tracking_metrics(t, xy, path)
+    assert m["completion_time_s"] is None
+    assert m["mean_distance_m"] == pytest.approx(0.005, rel=1e-3)
+    assert m["max_distance_m"] == pytest.approx(0.010, rel=1e-9)
+    assert m["final_progress"] == pytest.approx(0.5, rel=1e-9)
+    assert m["mean_speed_along_path_m_per_s"] == pytest.approx(0.01, rel=1e-9)
+
+
+def test_pose_errors_interpolate_the_truth_and_wrap_headings():
+    tt = np.linspace(0, 10, 101)
+    truth = np.c_[0.01 * tt, np.zeros_like(tt), np.pi - 0.05 + 0.01 * tt]   # heading crosses +pi
+    te = np.array([1.05, 5.0, 9.95, 20.0])                                   # the last is outside
+    est = np.c_[0.01 * te + 0.001, np.full(4, 0.002), (np.pi - 0.05 + 0.01 * te + 0.02 + np.pi) % (2 * np.pi) - np.pi]
+    e = pose_errors(te, est, tt, truth)
+    assert e["n"] == 3
+    assert e["position_mean_m"] == pytest.approx(math.hypot(0.001, 0.002), rel=1e-9)
+    assert e["heading_max_rad"] == pytest.approx(0.02, abs=1e-9)
+
+
+def test_latency_pairs_each_firing_with_the_latest_send():
+    sent = [0.0, 1.5, 3.0]
+    fired = [0.030, 1.545, 3.020, 3.100]
+    lat = latency_stats(sent, fired)
+    assert lat["n"] == 4
+    assert lat["median_s"] == pytest.approx(np.median([0.03, 0.045, 0.02, 0.1]))
+    assert lat["max_s"] == pytest.approx(0.1)

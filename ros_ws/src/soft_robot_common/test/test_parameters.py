@@ -1,0 +1,93 @@
+"""Param tables: descriptors, start-up checks, live sets, undeclared overrides (in-process rclpy)."""
+
+import dataclasses
+
+import pytest
+import rclpy
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from soft_robot_common import ConfigurationError, Param, declare_parameters, params_from_dataclass, undeclared_overrides
+
+TABLE = [Param("gain", 1.0, "a live gain", min=0.0, max=2.0, live=True),
+         Param("count", 3, "a fixed count", min=1, max=5),
+         Param("mode", "e", "a live mode", choices=("e", "r"), live=True),
+         ("legacy", "s", "an old-style row")]
+
+
+@pytest.fixture(scope="module")
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.shutdown(context=ctx)
+
+
+def _node(context, overrides=(), name="param_test"):
+    node = Node(name, context=context, parameter_overrides=list(overrides))
+    node.changes = []
+    node.values = declare_parameters(node, TABLE, on_change=node.changes.append,
+                                     validate=lambda v: "gain must be below count" if v["gain"] >= v["count"] else None)
+    return node
+
+
+def test_descriptors_carry_ranges_choices_and_read_only(context):
+    node = _node(context)
+    gain, count, mode, legacy = node.describe_parameters(["gain", "count", "mode", "legacy"])
+    assert (gain.floating_point_range[0].from_value, gain.floating_point_range[0].to_value) == (0.0, 2.0)
+    assert not gain.read_only and count.read_only and legacy.read_only
+    assert (count.integer_range[0].from_value, count.integer_range[0].to_value) == (1, 5)
+    assert "one of: e, r" in mode.description
+    node.destroy_node()
+
+
+def test_live_sets_are_checked_then_applied(context):
+    node = _node(context)
+    assert node.set_parameters([Parameter("gain", value=0.5)])[0].successful
+    assert node.values["gain"] == 0.5 and node.changes == [{"gain": 0.5}]
+    for bad in (Parameter("gain", value=2.5), Parameter("mode", value="x"), Parameter("count", value=2),
+                Parameter("gain", value=float("nan"))):
+        r = node.set_parameters([bad])[0]
+        assert not r.successful and r.reason, bad.name
+    assert node.values == {"gain": 0.5, "count": 3, "mode": "e", "legacy": "s"}
+    assert len(node.changes) == 1
+    node.destroy_node()
+
+
+@pytest.mark.parametrize("override,words", [
+    (Parameter("gain", value=3.0), "above its maximum 2.0"),
+    (Parameter("gain", value=1), "floating-point number"),
+    (Parameter("mode", value="zz"), "not one of"),
+    (Parameter("count", value=0), "below its minimum 1"),
+    (Parameter("gain", value=1.9), None),          # accepted alone ...
+])
+def test_start_up_values_are_checked(context, override, words):
+    if words is None:
+        node = _node(context, [override])
+        assert node.values["gain"] == 1.9
+        node.destroy_node()
+        return
+    with pytest.raises(ConfigurationError, match=words):
+        _node(context, [override])
+
+
+def test_cross_check_at_start_up(context):
+    with pytest.raises(ConfigurationError, match="gain must be below count"):
+        _node(context, [Parameter("gain", value=1.5), Parameter("count", value=1)])
+
+
+def test_undeclared_overrides_name_the_closest_parameter(context):
+    node = _node(context, [Parameter("gian", value=1.0), Parameter("zzz_unrelated", value=1)])
+    assert undeclared_overrides(node) == [("gian", "gain"), ("zzz_unrelated", None)]
+    node.destroy_node()
+
+
+def test_rows_from_a_dataclass():
+    @dataclasses.dataclass(frozen=True)
+    class S:
+        w: float = dataclasses.field(default=2.0, metadata={"description": "weight", "range": (0.0, None),
+                                                            "unit": "1/m", "live": True})
+        kind: str = dataclasses.field(default="a", metadata={"choices": ("a", "b")})
+    w, kind = params_from_dataclass(S)
+    assert (w.name, w.default, w.min, w.max, w.live) == ("w", 2.0, 0.0, None, True)
+    assert w.description == "weight [1/m]" and kind.choices == ("a", "b") and not kind.live
+    assert w.problem(-1.0) and not w.problem(5.0)
