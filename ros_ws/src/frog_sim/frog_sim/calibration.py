@@ -20,8 +20,9 @@ run on the result.
 
 Search
 ------
-Coarse-to-fine, few free parameters: (1) a grid over the kick's geometry -- limb fluid
-width, rear root angle, front root offset -- scored on the transition and yaw terms only
+Coarse-to-fine, few free parameters: (1) a grid over the kick's geometry -- the sense of
+the relaxed curl (Fig. 2b does not show it), limb fluid width, rear root angle, front
+root offset -- scored on the transition and yaw terms only
 (one simulation per primitive, ~0.5 s a point); (2) Nelder-Mead on the full objective
 (with the speeds, ~10 s a point) from the best grid point, adding C_bn. Every evaluation
 is cached (in memory and in ``<out>/evaluations.jsonl``, so a rerun resumes).
@@ -49,9 +50,14 @@ TURN_PRIMITIVES = ('C', 'D', 'E', 'F')
 SLIP_PRIMITIVES = ('E', 'F')
 #: The physics of issue 11 that the calibration starts from (see README "Fidelity").
 PHYSICAL_BASE = {'body_fluid_section': 'height', 'added_mass_lumping': 'direction_average'}
+#: The model before issue 11 (4 mm body rod, 4 mm limbs, paper's lumping, one root angle).
+LEGACY_MODEL = {'body_fluid_section': 'rod', 'added_mass_lumping': 'normal', 'limb_fluid_width': 0.004,
+                'limb_root_angle_deg': -75.0, 'front_root_angle_offset_deg': 0.0, 'body_drag_normal': 0.8,
+                'limb_curl_direction': 'backward'}
 DEFAULT_FREE = ('limb_fluid_width', 'limb_root_angle_deg', 'front_root_angle_offset_deg', 'body_drag_normal')
 #: Stage 1 (transitions and yaw decay only, ~0.5 s per point): the geometry of the kick.
 DEFAULT_GRID = {
+    'limb_curl_direction': ('backward', 'forward'),
     'limb_fluid_width': (0.010, 0.016, 0.022, 0.028),
     'limb_root_angle_deg': (-90.0, -75.0, -60.0, -45.0),
     'front_root_angle_offset_deg': (0.0, 30.0, 60.0, 90.0),
@@ -148,7 +154,7 @@ class JointObjective:
 
     def _key(self, values: dict) -> str:
         return json.dumps({'id': self.ident, 'speeds': self.speeds, 'cycles': self.speed_cycles,
-                           **{k: round(float(v), 6) for k, v in sorted(values.items())}})
+                           **{k: (v if isinstance(v, str) else round(float(v), 6)) for k, v in sorted(values.items())}})
 
     def simulate(self, params: FrogParameters) -> dict:
         """Simulated counterparts: per-primitive transitions, kick decay, speeds."""
@@ -218,7 +224,7 @@ class JointObjective:
         sim = self.simulate(params)
         terms = self.terms(sim)
         cost = float(sum(v for k, v in terms.items() if not k.startswith('_')))
-        ev = Evaluation({k: float(v) for k, v in values.items()}, cost, terms, sim)
+        ev = Evaluation({k: (v if isinstance(v, str) else float(v)) for k, v in values.items()}, cost, terms, sim)
         self.cache[key] = ev
         if self.cache_file:
             with open(self.cache_file, 'a') as fh:
@@ -254,15 +260,17 @@ def coarse_to_fine(grid_objective: JointObjective, grid: dict, refine_objective:
     if refine_objective is None or refine_iterations <= 0:
         return best, history
     start = {**best.values, **(refine or {})}
-    names = list(start)
-    scale = np.array([np.ptp(grid[n]) / max(len(grid[n]) - 1, 1) if n in grid and len(grid[n]) > 1
+    fixed = {n: v for n, v in start.items() if isinstance(v, str)}   # choices stay at the grid's best
+    names = [n for n in start if n not in fixed]
+    scale = np.array([np.ptp(np.asarray(grid[n], dtype=float)) / max(len(grid[n]) - 1, 1)
+                      if n in grid and len(grid[n]) > 1
                       else max(abs(start[n]) * 0.1, 1e-3) for n in names])
     bounds = [parameter_range(n) for n in names]
     x0 = np.array([start[n] for n in names]) / scale
     refined = []
 
     def f(z):
-        vals = {n: float(np.clip(v * s, *b)) for n, v, s, b in zip(names, z, scale, bounds)}
+        vals = {**fixed, **{n: float(np.clip(v * s, *b)) for n, v, s, b in zip(names, z, scale, bounds)}}
         ev = refine_objective(vals)
         refined.append(ev)
         history.append(('refine', ev))

@@ -70,6 +70,7 @@ class FidelityConfig:
     runs: tuple = hr.HARDWARE_RUNS
     speeds: bool = True
     coast_speed: float = 0.025
+    coast_duration: float = 60.0
     repeat_periods: int = 12
 
 
@@ -357,7 +358,7 @@ def fidelity_report(params: FrogParameters | None = None, config: FidelityConfig
     config = config or FidelityConfig()
     library = library or ActuationLibrary.load()
     if real is None:
-        folder = find_data_file('hardware_runs/line1.csv').parent
+        folder = find_data_file(f'hardware_runs/{config.runs[0]}.csv').parent
         real = real_transitions(folder, config.runs, config.tag_offset_deg)
     trs, info = real
     sim = FrogSimulation(params, time_step=config.time_step, library=library)
@@ -386,7 +387,7 @@ def fidelity_report(params: FrogParameters | None = None, config: FidelityConfig
     kick = kick_from_rest(sim, 'E')
     rep = repeated_kicks(sim, 'E', period=period, n=config.repeat_periods)
     same = [(a, b) for a, b in ef if a.previous == a.primitive]
-    coast = coasting(sim, config.coast_speed)
+    coast = coasting(sim, config.coast_speed, config.coast_duration)
     summary = {
         'turning_abs_dheading': {'real': _stats([abs(a.dheading) for a, _ in turning]),
                                  'sim': _stats([abs(b.dheading) for _, b in turning])},

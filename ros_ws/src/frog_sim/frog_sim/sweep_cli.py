@@ -84,7 +84,7 @@ def cmd_calibrate_any(args) -> int:
 
 
 def _fmt_values(values: dict) -> str:
-    return ", ".join(f"{k} = {v:.4g}" for k, v in values.items())
+    return ", ".join(f"{k} = {v}" if isinstance(v, str) else f"{k} = {v:.4g}" for k, v in values.items())
 
 
 def cmd_calibrate_joint(args) -> int:
@@ -129,19 +129,20 @@ def cmd_calibrate_joint(args) -> int:
     # final numbers with the standard 8-cycle speeds; today's model for comparison
     final = cal.JointObjective(targets, cal_speeds, exp_speeds, base, speed_cycles=8, **common)
     ev_best = final(best.values)
-    legacy = cal.JointObjective(targets, cal_speeds, exp_speeds, FrogParameters(), speed_cycles=8, **common)
-    legacy_vals = {k: getattr(FrogParameters(), k) for k in best.values}
+    legacy_base = FrogParameters().replace(**cal.LEGACY_MODEL)
+    legacy = cal.JointObjective(targets, cal_speeds, exp_speeds, legacy_base, speed_cycles=8, **common)
+    legacy_vals = {k: getattr(legacy_base, k) for k in best.values}
     ev_legacy = legacy(legacy_vals)
     # cross-validation: held-out sines, transition terms only
     held = cal.JointObjective(test_targets, cal_speeds, exp_speeds, base, speeds=False, **common)
-    held_legacy = cal.JointObjective(test_targets, cal_speeds, exp_speeds, FrogParameters(), speeds=False, **common)
+    held_legacy = cal.JointObjective(test_targets, cal_speeds, exp_speeds, legacy_base, speeds=False, **common)
     ev_held, ev_held_legacy = held(best.values), held_legacy(legacy_vals)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     print(f"tag offset from B on the line runs: {offset_deg:.1f} deg (sd {np.degrees(offset_sd):.1f}, n {n_off})")
     print(f"grid best (transitions + yaw only): {_fmt_values(grid_best.values)}; cost {grid_best.cost:.2f}")
     print(f"calibrated: {_fmt_values(ev_best.values)}")
     rows = sorted(k for k in ev_best.terms if not k.startswith("_"))
-    print(f"\n{'term (1 = at tolerance)':28s} {'today':>8s} {'calibrated':>11s} {'held-out today':>15s} "
+    print(f"\n{'term (1 = at tolerance)':28s} {'before':>8s} {'calibrated':>11s} {'held-out before':>15s} "
           f"{'held-out cal.':>14s}")
     for k in rows:
         print(f"{k:28s} {ev_legacy.terms.get(k, np.nan):8.2f} {ev_best.terms[k]:11.2f} "
@@ -151,8 +152,8 @@ def cmd_calibrate_joint(args) -> int:
           f"{1e3 * ev_best.terms['_rms_calibration_m_s']:.1f}, all experiments "
           f"{1e3 * ev_legacy.terms['_rms_experiments_m_s']:.1f} -> {1e3 * ev_best.terms['_rms_experiments_m_s']:.1f}")
     deg = np.degrees(1.0)
-    print(f"\n{'prim':>4} {'n':>3} {'dh real':>8} {'today':>7} {'cal.':>7} | {'dy real':>8} {'today':>7} "
-          f"{'cal.':>7} | {'dx real':>8} {'today':>7} {'cal.':>7}   (fit runs; deg, mm)")
+    print(f"\n{'prim':>4} {'n':>3} {'dh real':>8} {'before':>7} {'cal.':>7} | {'dy real':>8} {'before':>7} "
+          f"{'cal.':>7} | {'dx real':>8} {'before':>7} {'cal.':>7}   (fit runs; deg, mm)")
     for p, t in targets.items():
         a, b = ev_legacy.sim["transitions"][p], ev_best.sim["transitions"][p]
         print(f"{p:>4} {t.n:3d} {deg * t.dheading:8.1f} {deg * a['dheading']:7.1f} {deg * b['dheading']:7.1f} | "
@@ -161,10 +162,10 @@ def cmd_calibrate_joint(args) -> int:
     print(f"\n{len(history)} evaluations, {wall:.0f} s wall, {cpu:.0f} s CPU")
     result = {"tag_offset_deg": offset_deg, "base": cal.PHYSICAL_BASE, "calibrated": ev_best.values,
               "grid_best": grid_best.values, "terms": ev_best.terms, "cost": ev_best.cost,
-              "today": {"values": legacy_vals, "terms": ev_legacy.terms, "cost": ev_legacy.cost},
+              "before": {"values": legacy_vals, "terms": ev_legacy.terms, "cost": ev_legacy.cost},
               "cross_validation": {"fit_runs": list(cal.TRAIN_RUNS), "held_out_runs": list(cal.TEST_RUNS),
                                    "held_out_terms": ev_held.terms, "held_out_cost": ev_held.cost,
-                                   "held_out_today_terms": ev_held_legacy.terms},
+                                   "held_out_before_terms": ev_held_legacy.terms},
               "targets": {p: vars(t) for p, t in targets.items()},
               "held_out_targets": {p: vars(t) for p, t in test_targets.items()},
               "simulated": ev_best.sim, "history": [{"stage": st, "values": ev.values, "cost": ev.cost}
@@ -176,15 +177,15 @@ def cmd_calibrate_joint(args) -> int:
     for i, name in enumerate(cal.DEFAULT_GRID):
         vals = sorted({ev.values[name] for ev in grid_evs})
         lo = [min(ev.cost for ev in grid_evs if ev.values[name] == v) for v in vals]
-        x = (np.array(vals) - min(vals)) / max(np.ptp(vals), 1e-12)
-        axes[0].plot(x, lo, "-o", label=f"{name} {min(vals):g}..{max(vals):g}")
+        x = np.linspace(0.0, 1.0, len(vals))
+        axes[0].plot(x, lo, "-o", label=f"{name} {vals[0]}..{vals[-1]}")
     axes[0].set_xlabel("parameter, scaled to its grid (0 = lowest value)")
     axes[0].set_ylabel("lowest grid cost (transitions + yaw)")
     axes[0].legend(fontsize=7)
     axes[0].set_title("stage 1: grid")
     keys = rows
     xk = np.arange(len(keys))
-    for j, (lab, ev) in enumerate((("today (fit runs)", ev_legacy), ("calibrated (fit runs)", ev_best),
+    for j, (lab, ev) in enumerate((("before (fit runs)", ev_legacy), ("calibrated (fit runs)", ev_best),
                                    ("calibrated (held-out sines)", ev_held))):
         axes[1].bar(xk + 0.27 * (j - 1), [ev.terms.get(k, np.nan) for k in keys], 0.27, label=lab)
     axes[1].axhline(1.0, color="k", lw=0.8, ls="--")
