@@ -9,7 +9,7 @@ Layout (robot frame ``frog``: x forward, y left, origin at the body centre):
   edges and carries two bending energies (body corner + limb root), paper "Energy ...".
   The root direction is the lateral direction turned toward the rear by
   ``-limb_root_angle_deg`` (rear limbs; default -90 deg: straight aft), the front limbs
-  ``front_root_angle_offset_deg`` further forward (default 61: 29 deg aft of lateral).
+  ``front_root_angle_offset_deg`` further forward (default 32: 58 deg aft of lateral).
   Fig. 2b gives no angle; both were calibrated jointly against the hardware turning
   transitions and the speed experiments (``frog-sweep calibrate``, issue 11).
 * Fluid sections: the body's edges take its height as D in eq. 1 and 3 (H_f at the front
@@ -20,9 +20,10 @@ Layout (robot frame ``frog``: x forward, y left, origin at the body centre):
   and it carries the limb curvature of that half cell, so that the whole limb length
   is curved (the polygon is inscribed in an arc tangent to the root direction). The
   limb's interior bends are actuated: natural curvature ``sign * kappa(t)`` (eq. 9),
-  stiffness ``E(t) I``. Relaxed aft-pointing limbs curl toward the body axis
-  (``limb_curl_direction = 'backward'``); the fast unrolling kick drives the robot
-  forward (+x), the slow re-curling (recovery) costs less because drag is quadratic.
+  stiffness ``E(t) I``. Relaxed aft-pointing limbs curl away from the body axis
+  (``limb_curl_direction = 'forward'``, calibrated, issue 11; ``'backward'`` curls them
+  toward it); the fast unrolling kick drives the robot forward (+x), the slow
+  re-curling (recovery) costs less because drag is quadratic.
 * No contact is modelled; a curled rear limb may overlap the body in the plane (in
   the robot the limbs sit below the foam body).
 """

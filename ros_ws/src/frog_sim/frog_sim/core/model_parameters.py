@@ -20,11 +20,12 @@ and rear sides of the body (issue 11): they set the body's drag (eq. 1) and adde
 
 Fluid model after issue 11 (``frog-sim fidelity``): the body's sections are its height
 instead of a 4 mm rod, the limbs are flat strips of a calibrated width, added mass is
-lumped with its direction average, and the front/rear root angles and C_bn are jointly
-calibrated against the hardware transitions and all experiment speeds (``frog-sweep
-calibrate``). ``body_fluid_section='rod'``, ``limb_fluid_width=0.004``,
-``added_mass_lumping='normal'``, ``limb_root_angle_deg=-75``,
-``front_root_angle_offset_deg=0``, ``body_drag_normal=0.8`` restore the earlier model.
+lumped with its direction average, and the sense of the relaxed curl, the front/rear
+root angles and C_bn are jointly calibrated against the hardware transitions and all
+experiment speeds (``frog-sweep calibrate``). ``frog_sim.calibration.LEGACY_MODEL``
+(``body_fluid_section='rod'``, ``limb_fluid_width=0.004``, ``added_mass_lumping='normal'``,
+``limb_curl_direction='backward'``, ``limb_root_angle_deg=-75``,
+``front_root_angle_offset_deg=0``, ``body_drag_normal=0.8``) restores the earlier model.
 """
 from __future__ import annotations
 
@@ -92,7 +93,7 @@ class FrogParameters:
     # C_lt
     limb_drag_tangent: float = field(default=0.01, metadata={'range': (0.0, 1.0), 'unit': '-'})
     # C_bn (jointly calibrated with the body's height section, issue 11; paper 0.8 with a 4 mm rod)
-    body_drag_normal: float = field(default=0.74, metadata={'range': (0.0, 5.0), 'unit': '-'})
+    body_drag_normal: float = field(default=0.71, metadata={'range': (0.0, 5.0), 'unit': '-'})
     # C_bt
     body_drag_tangent: float = field(default=0.008, metadata={'range': (0.0, 1.0), 'unit': '-'})
     # C_a (theoretical value)
@@ -103,7 +104,7 @@ class FrogParameters:
     # one primitive per 1.5 s (DESIGN.md)
     primitive_period: float = field(default=1.5, metadata={'range': (0.2, 10.0), 'unit': 's'})
     # sense of the relaxed curl (see frog_model)
-    limb_curl_direction: str = field(default='backward', metadata={'choices': ('forward', 'backward'), 'unit': '-'})
+    limb_curl_direction: str = field(default='forward', metadata={'choices': ('forward', 'backward'), 'unit': '-'})
     # limb root direction: 0 lateral, -90 aft, +90 forward
     limb_root_angle_deg: float = field(default=-90.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
     # --- fluid sections (issue 11) ---
@@ -111,13 +112,13 @@ class FrogParameters:
     # body's own height, H_f at the front side to H_a at the rear side (Fig. 2b)
     body_fluid_section: str = field(default='height', metadata={'choices': ('rod', 'height'), 'unit': '-'})
     # projected width of a limb strip normal to the swimming plane (drag eq. 1, added mass eq. 3)
-    limb_fluid_width: float = field(default=0.028, metadata={'range': (0.002, 0.03), 'unit': 'm'})
+    limb_fluid_width: float = field(default=0.030, metadata={'range': (0.002, 0.03), 'unit': 'm'})
     # eq. 4 lumping of added mass: 'normal' (paper: full normal value at every node) or
     # 'direction_average' (half of it: a slender section has added mass only normal to itself)
     added_mass_lumping: str = field(default='direction_average', metadata={'choices': ('normal', 'direction_average'),
                                                               'unit': '-'})
     # front limbs' root direction relative to the rear limbs' (0: all four alike)
-    front_root_angle_offset_deg: float = field(default=61.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
+    front_root_angle_offset_deg: float = field(default=32.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
 
     def replace(self, **changes) -> 'FrogParameters':
         """Return a copy with some fields changed (validated)."""
@@ -237,7 +238,7 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     'fluid_density': ('kg/m^3', 'paper: rho_f = 1000'),
     'limb_drag_normal': ('-', 'paper: C_ln = 1'),
     'limb_drag_tangent': ('-', 'paper: C_lt = 0.01'),
-    'body_drag_normal': ('-', 'joint calibration (frog-sweep calibrate, issue 11): 0.74 with the body height '
+    'body_drag_normal': ('-', 'joint calibration (frog-sweep calibrate, issue 11): 0.71 with the body height '
                          'section (paper: 0.8 with a 4 mm rod, calibrated on the 10 % runs only)'),
     'body_drag_tangent': ('-', 'paper: C_bt = 0.008 = C_bn / 100'),
     'added_mass_coefficient': ('-', 'paper: C_a = 1 (theoretical)'),
@@ -247,18 +248,21 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     'body_fluid_section': ('-', "'height': the body's sides are H_f (front) to H_a (rear) tall (Fig. 2b), so "
                            "eq. 1 and 3 use that height as D; 'rod': the 4 mm body_rod_diameter"),
     'limb_fluid_width': ('m', 'joint calibration (issue 11): projected width of the flat limb strip normal to the '
-                         'plane (Fig. 3a), 28 mm ~ the body height; not given by the paper (legacy: 4 mm = 2 r)'),
+                         'plane (Fig. 3a): 30 mm, the upper bound (~ the body height); not given by the paper '
+                         '(legacy: 4 mm = 2 r)'),
     'added_mass_lumping': ('-', "eq. 4 lumps added mass isotropically; 'direction_average' uses half the normal "
                            'value (a slender section has added mass only normal to itself: exact for a '
                            "translating square ring); 'normal' = paper"),
     'front_root_angle_offset_deg': ('deg', 'joint calibration (issue 11): front limbs turned by this much toward '
-                                    'the front relative to limb_root_angle_deg: 61 -> front limbs 29 deg aft of '
+                                    'the front relative to limb_root_angle_deg: 32 -> front limbs 58 deg aft of '
                                     'lateral (Fig. 2b gives no angle for either pair)'),
     'pulse_duration': ('s', 'DESIGN.md hardware pulse 80 ms (paper characterisation 70 ms)'),
     'primitive_period': ('s', 'DESIGN.md: one primitive per 1.5 s'),
-    'limb_curl_direction': ('-', "'backward' = the curl turns a lateral limb toward the rear, i.e. an "
-                            'aft-pointing limb toward the body axis; the kick (unrolling) then drives '
-                            'the robot forward'),
+    'limb_curl_direction': ('-', "'forward' = the relaxed curl turns a lateral limb toward the front, i.e. "
+                            "an aft-pointing limb away from the body axis; 'backward' the other way. Not "
+                            "shown by the paper; joint calibration (issue 11): 'forward' (per-period "
+                            "heading changes within 25 % of the robot's), 'backward' (the earlier choice, "
+                            'from forward speed only) turns about half as much'),
 }
 
 
