@@ -24,13 +24,12 @@ from .schedules import LIMB_NAMES, ActivationSchedule
 
 #: Default time step [s], chosen from the dt convergence study (``frog-sim convergence``
 #: plus finer steps; 10 cycles at 1 Hz, 10 % EGaIn), rerun for the issue-11 fluid model:
-#: the 10-cycle displacement is 404.5 / 431.5 / 445.7 / 452.2 / 455.2 / 456.5 / 457.1 mm at
-#: dt = 8 / 4 / 2 / 1 / 0.5 / 0.25 / 0.125 ms. The changes (27.0, 14.1, 6.6, 3.0, 1.3,
-#: 0.6 mm) halve with dt: backward Euler's first order, dt -> 0 estimate ~457.6 mm.
-#: 2 ms is 2.6 % below it and within 2.1 % / 1.0 % of 1 ms for 30 % EGaIn at 1.3 Hz /
-#: 50 % at 2 Hz, with half the steps of 1 ms. Halving dl (46, 92 edges per side, 1 ms)
-#: changes it by 1.5 and 0.1 mm. (The earlier 4 mm-rod model was not yet asymptotic
-#: above 0.5 ms: the limbs' stiff bending modes were less damped by the fluid.)
+#: the 10-cycle displacement is 412.7 / 439.5 / 456.5 / 465.2 / 468.5 / 469.5 / 469.7 mm
+#: at dt = 8 / 4 / 2 / 1 / 0.5 / 0.25 / 0.125 ms: changes 26.8, 17.1, 8.6, 3.3, 1.0,
+#: 0.2 mm, first order down to 1 ms and faster below (dt -> 0: ~469.7 mm). 2 ms is 2.8 %
+#: below it and within 0.7 % / 0.05 % of 1 ms for 30 % EGaIn at 1.3 Hz / 50 % at 2 Hz
+#: (4 ms: 2.8 % / 3.3 %), with half the steps of 1 ms. Halving dl (46, 92 edges per side,
+#: 1 ms) changes it by 4.6 mm (1.0 %) and 0.4 mm.
 DEFAULT_TIME_STEP = 2.0e-3
 #: Default Newton force tolerance [N]: ~0.1 % of the nodal drag/inertia forces of a limb
 #: during a kick (~1e-3 N). Tightening it to 1e-8 N changes the 10-cycle displacement at
