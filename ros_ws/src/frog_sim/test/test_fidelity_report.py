@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from frog_sim.core.hardware_runs import synthesize_log
+from frog_sim.core.model_parameters import FrogParameters
 from frog_sim.core.simulation import FrogSimulation
 from frog_sim.fidelity import FidelityConfig, fidelity_report, format_table, plot_report, targets
 
@@ -40,3 +41,19 @@ def test_the_model_reproduces_its_own_logs(synthetic_runs, tmp_path, monkeypatch
     assert len(out["pairs"]) == sum(rep.primitives[p]["dx"]["real"]["n"] for p in rep.primitives)
     files = plot_report(rep, tmp_path)
     assert all(f.stat().st_size > 10_000 for f in files)
+
+
+def test_turning_matches_the_hardware_runs(measured_file):
+    """Issue 11 targets on the real logs (each primitive from its mean real start state):
+    heading change of C-F within 25 %, B's forward distance within 15 %, E/F side-slip signs."""
+    from frog_sim import calibration as cal
+    folder = measured_file("hardware_runs/line1.csv").parent
+    _, targets, _ = cal.read_targets(folder, ("line1", "line2", "sin1", "sin2", "sin3", "sin4"), -5.2)
+    obj = cal.JointObjective(targets, [], [], FrogParameters(), speeds=False)
+    sim = obj.simulate(FrogParameters())["transitions"]
+    for p in "CDEF":
+        ratio = sim[p]["dheading"] / targets[p].dheading
+        assert 0.75 <= ratio <= 1.25, (p, ratio)
+    assert 0.85 <= sim["B"]["dx"] / targets["B"].dx <= 1.15
+    for p in "EF":
+        assert sim[p]["dy"] * targets[p].dy > 0, p
