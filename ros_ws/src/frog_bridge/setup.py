@@ -14,10 +14,13 @@ setup(
     zip_safe=True,
     maintainer='Soft robot stack developers',
     maintainer_email='dev@soft-robot-stack.invalid',
-    description='Serial',
+    description='Serial link (UART to the nRF52 BLE relay) to the frog robot, limb protection, and a robot emulator',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'bridge_node = frog_bridge.nodes.bridge_node:main',
+            'robot_emulator = frog_bridge.nodes.robot_emulator:main',
+            'frog-bridge = frog_bridge.cli:main',
         ],
     },
 )

@@ -10,6 +10,8 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
     ],
+    package_data={package_name: ['data/*.yaml']},
+    include_package_data=True,
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='Soft robot stack developers',
@@ -18,6 +20,10 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'camera_sim = frog_vision.nodes.camera_sim:main',
+            'tracker_node = frog_vision.nodes.tracker_node:main',
+            'camera_node = frog_vision.nodes.camera_node:main',
+            'frog-vision = frog_vision.cli:main',
         ],
     },
 )

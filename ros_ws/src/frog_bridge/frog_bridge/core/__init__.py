@@ -1,1 +1,2 @@
-"""Pure-Python core of frog_bridge: no rclpy imports, unit-tested without ROS."""
+"""Pure-Python core of frog_bridge (no rclpy): protocol codec, scheduler, limb protection,
+link supervision, and the robot emulator's model."""

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .actuation import ActuationLibrary, CurvatureProfile
+from .actuation import ActuationLibrary, CurvatureProfile, profile_value
 from .frog_model import FrogModel, build_frog_model
 from .integrator import ConvergenceError, ImplicitEulerIntegrator
 from .model_parameters import FrogParameters
@@ -137,6 +137,8 @@ class FrogSimulation:
         self.profile = profile
         self.model: FrogModel = build_frog_model(self.params, profile.relaxed_curvature)
         self._actuator = self.model.actuator_arrays(profile)
+        self._nominal_rows = self._actuator.limb_profile.copy()
+        self._apply_limb_strength()
         self.integrator = ImplicitEulerIntegrator(
             self.model.network, self.model.mass, fluid_density=self.params.fluid_density,
             actuator=self._actuator, solver=self._solver, force_tolerance=self._force_tolerance)
@@ -192,8 +194,42 @@ class FrogSimulation:
         else:
             self.profile = prof
             self._actuator.limb_profile[:] = prof.as_row()
+            self._nominal_rows = self._actuator.limb_profile.copy()
+            self._apply_limb_strength()
         self._sync_schedule(force=True)
         return prof
+
+    def set_limb_strength(self, strength=None) -> None:
+        """Scale each limb's kick: the excursion of its eq. 9 curvature from rest times a factor.
+
+        Real limbs differ (wire, attachment, EGaIn fill); the digital twin draws one factor
+        per limb. ``strength`` maps limb names ('FL', 'FR', 'BL', 'BR') to factors > 0
+        (missing = 1); None restores the nominal kick. The relaxed curvature is unchanged.
+        """
+        strength = dict(strength or {})
+        bad = {k: v for k, v in strength.items() if k not in LIMB_NAMES or not (np.isfinite(v) and v > 0)}
+        if bad:
+            raise ValueError(f'limb strengths {bad} need limb names {LIMB_NAMES} and finite factors > 0')
+        self._limb_strength = strength
+        self._apply_limb_strength()
+
+    @property
+    def limb_strength(self) -> dict:
+        """Kick strength factor of each limb (1 = nominal)."""
+        return {l: float(getattr(self, '_limb_strength', {}).get(l, 1.0)) for l in LIMB_NAMES}
+
+    def _apply_limb_strength(self) -> None:
+        # eq. 9 rows: c1/(1 + exp(-c2 (t - c3))) + c4 for heating (0-3) and cooling (4-7);
+        # scaling c1 and c4's offset from rest scales the whole excursion, keeping the rest
+        rows = self._nominal_rows.copy()
+        for lid, limb in enumerate(LIMB_NAMES):
+            s = self.limb_strength[limb]
+            if s != 1.0:
+                rest = profile_value(rows[lid], -1.0)
+                for c1, c4 in ((0, 3), (4, 7)):
+                    rows[lid, c1] *= s
+                    rows[lid, c4] = rest + s * (rows[lid, c4] - rest)
+        self._actuator.limb_profile[:] = rows
 
     # ------------------------------------------------------------------ schedules
     def set_gait(self, frequency_hz: float, phase_offset: float = 0.5, start: float | None = None,

@@ -18,6 +18,8 @@ import math
 import sys
 import time
 
+import numpy as np
+
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, TransformStamped
@@ -57,6 +59,9 @@ _NODE_PARAMS = [
     Param("gait_phase_offset", 0.5, "rear-pair delay as a fraction of the gait cycle, [0, 1)", min=0.0,
           max=0.999),
     Param("gait_duration_s", 0.0, "stop the gait after this long [s]; 0 = forever", min=0.0, max=1e6),
+    Param("limb_strength_sd", 0.0, "relative spread of the four limbs' kick strengths: each limb's factor is "
+          "drawn once from N(1, sd^2) with seed (real limbs differ); 0 = nominal", min=0.0, max=0.5),
+    Param("seed", 0, "random seed of the limb strengths", min=0, max=2**31 - 1),
     Param("duration_s", 0.0, "stop simulating (keep publishing the last state) after this simulated time "
           "[s]; 0 = run forever", min=0.0, max=1e7),
 ]
@@ -99,6 +104,10 @@ class SimNode(Node):
             params = defaults.replace(**model)
             self.sim = FrogSimulation(params, time_step=p["time_step"])
             self.sim.set_pose(p["initial_x"], p["initial_y"], p["initial_heading"])
+            if p["limb_strength_sd"] > 0:
+                rng = np.random.default_rng(p["seed"])
+                factors = np.clip(1.0 + p["limb_strength_sd"] * rng.standard_normal(len(LIMB_NAMES)), 0.2, 2.0)
+                self.sim.set_limb_strength(dict(zip(LIMB_NAMES, factors.tolist())))
             if p["gait_frequency_hz"] > 0:
                 self.sim.set_gait(p["gait_frequency_hz"], p["gait_phase_offset"],
                                   duration=p["gait_duration_s"] or None)
@@ -147,7 +156,8 @@ class SimNode(Node):
         self.get_logger().info(
             f"simulating the frog ({self.sim.model.n_nodes} nodes, EGaIn "
             f"{params.egain_vol_pct:g} %, dt {self.sim.time_step * 1e3:g} ms, real-time factor "
-            f"{p['real_time_factor']:g}{', gait %.2f Hz' % p['gait_frequency_hz'] if p['gait_frequency_hz'] else ''})")
+            f"{p['real_time_factor']:g}{', gait %.2f Hz' % p['gait_frequency_hz'] if p['gait_frequency_hz'] else ''}"
+            f"; limb strengths " + ", ".join(f"{k} {v:.2f}" for k, v in self.sim.limb_strength.items()) + ")")
 
     def on_parameters(self, changed: dict) -> None:
         if "real_time_factor" in changed:

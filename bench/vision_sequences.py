@@ -1,0 +1,79 @@
+"""Rendered test sequences of frog_sim's simulated frog (shared by bench/vision_accuracy.py
+and tests/test_vision_accuracy.py; outside any package core, so it may use both cores).
+
+The simulator executes a primitive every 1.5 s (forward strokes and turning strokes); every
+camera frame (30 fps) is rendered from the simulator's exact state: centre-of-mass pose,
+body twist and rod network, with the tag on the body ring's centre.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from frog_vision.core.evaluation import SequenceResult
+from frog_vision.core.renderer import Occluder
+from frog_vision.core.robot_shape import RobotShape, shape_from_segments
+from frog_vision.core.synthetic import Trajectory
+
+#: a forward stroke (B), three turning strokes one way (C: three limbs), a forward stroke and
+#: three the other way (D, C's mirror image)
+DEFAULT_PRIMITIVES = ("B", "C", "C", "C", "B", "D", "D", "D")
+
+
+def simulated_sequence(duration=10.0, fps=30.0, primitives=DEFAULT_PRIMITIVES, period=1.5,
+                       start=(-0.05, -0.15, 0.6)):
+    """(Trajectory, list of body-frame RobotShape) of the simulated frog at the camera's times."""
+    from frog_sim.core.model_parameters import FrogParameters
+    from frog_sim.core.simulation import FrogSimulation
+    sim = FrogSimulation(FrogParameters())
+    sim.set_pose(*start)
+    edges = sim.model.network.edges
+    ts, poses, twists, shapes = [], [], [], []
+    k, next_primitive = 0, 0.2
+    for i in range(int(round(duration * fps))):
+        t = i / fps
+        while sim.time + 1e-9 < t:
+            if sim.time + 1e-9 >= next_primitive:
+                sim.execute_primitive(primitives[k % len(primitives)])
+                k += 1
+                next_primitive += period
+            sim.step(1)
+        s = sim.rigid_body_state()
+        pose = np.array([s.com[0], s.com[1], s.heading])
+        world = shape_from_segments(sim.node_positions[edges.ravel()].reshape(-1, 2, 2))
+        c, sn = np.cos(pose[2]), np.sin(pose[2])
+        rot = np.array([[c, -sn], [sn, c]])
+        shapes.append(RobotShape((world.ring - pose[:2]) @ rot, (world.limbs - pose[:2]) @ rot))
+        ts.append(sim.time)
+        poses.append(pose)
+        twists.append([s.body_velocity[0], s.body_velocity[1], s.yaw_rate])
+    return Trajectory(np.array(ts), np.array(poses), np.array(twists), np.zeros(len(ts))), shapes
+
+
+def run_simulated(renderer, tracker, truth: Trajectory, shapes, occlusion=()) -> SequenceResult:
+    """Render and track a simulated sequence (like ``evaluation.run_sequence`` with the
+    simulator's shapes; the tag sits on each frame's ring centre)."""
+    n = len(truth.t)
+    measured, filtered, vel = (np.full((n, 3), np.nan) for _ in range(3))
+    detected, occluded, dropped = (np.zeros(n, bool) for _ in range(3))
+    compute = np.zeros(n)
+    for i in range(n):
+        t = truth.t[i]
+        sh = shapes[i]
+        offset = (float(sh.ring_centre[0]), float(sh.ring_centre[1]), 0.0)
+        occ = []
+        if any(a <= t < b for a, b in occlusion):
+            occ = [Occluder(truth.pose[i, 0], truth.pose[i, 1], 0.07)]
+            occluded[i] = True
+        if renderer.should_drop():
+            dropped[i] = True
+            continue
+        img = renderer.render(truth.pose[i], truth.twist[i], sh, offset, occ)
+        r = tracker.process(img, float(t))
+        compute[i] = r.compute_s
+        if r.measurement is not None:
+            measured[i] = r.measurement.pose
+            detected[i] = True
+        if r.state is not None:
+            filtered[i] = r.state.pose
+            vel[i] = r.state.body_velocity
+    return SequenceResult(truth, measured, filtered, vel, detected, occluded, dropped, compute)

@@ -1,0 +1,132 @@
+"""Limb protection: a limit on how often and how long each SMA limb is heated.
+
+An SMA limb that is reheated before its nitinol wire has cooled does not relax, so it
+gives no stroke, and repeated heating without cooling degrades the shape-memory response
+(seed 000, "Actuator Characterization"; Section 2.2). Two limits, both per limb:
+
+- ``min_limb_interval_s``: at most one pulse start per interval (cooling before reheat);
+- ``max_duty_cycle``: heated time / ``duty_window_s`` over any window ending at the end of
+  the new pulse (the mean heating power the limb can shed).
+
+How the defaults follow from the measured curvature profiles is documented in the
+package README section "Serial bridge (frog_bridge)" and in :data:`DEFAULTS`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+from .limbs import LIMB_NAMES
+
+_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class ProtectionConfig:
+    """Per-limb heating limits.
+
+    Attributes
+    ----------
+    min_limb_interval_s : float
+        Shortest time between two pulse starts on one limb [s].
+    max_duty_cycle : float
+        Largest heated fraction of any ``duty_window_s`` window, 0-1.
+    duty_window_s : float
+        Length of the duty-cycle window [s].
+    """
+
+    min_limb_interval_s: float = 0.8
+    max_duty_cycle: float = 0.10
+    duty_window_s: float = 10.0
+
+    def problem(self) -> str | None:
+        """Why this configuration is unusable, or None."""
+        if not (math.isfinite(self.min_limb_interval_s) and self.min_limb_interval_s >= 0):
+            return f"min_limb_interval_s {self.min_limb_interval_s!r} must be >= 0"
+        if not (0 < self.max_duty_cycle <= 1):
+            return f"max_duty_cycle {self.max_duty_cycle!r} must be in (0, 1]"
+        if not (math.isfinite(self.duty_window_s) and self.duty_window_s > 0):
+            return f"duty_window_s {self.duty_window_s!r} must be > 0"
+        return None
+
+
+# Defaults for the authors' hardware (10 vol% EGaIn limbs, 80 ms pulses): the fastest cycle
+# these limbs were characterised at is 1.2 Hz (0.83 s; limb_curvature_profiles.csv), their
+# curvature is 90 % recovered 0.53-0.75 s after the pulse starts; 1.2 Hz x 80 ms = 9.6 % duty.
+DEFAULTS = ProtectionConfig()
+
+
+@dataclass(frozen=True)
+class PlannedPulse:
+    """One ``h`` line: limbs heated from ``start`` for ``duration`` seconds."""
+
+    start: float
+    limbs: tuple[int, ...]
+    duration: float
+
+
+def _overlap(a0: float, a1: float, b0: float, b1: float) -> float:
+    return max(0.0, min(a1, b1) - max(a0, b0))
+
+
+class LimbGuard:
+    """Remembers the pulses written per limb and refuses pulses that break the limits."""
+
+    def __init__(self, config: ProtectionConfig = DEFAULTS):
+        problem = config.problem()
+        if problem:
+            raise ValueError(problem)
+        self.config = config
+        self._history: dict[int, deque[tuple[float, float]]] = {i: deque() for i in LIMB_NAMES}
+
+    def last_start(self, limb: int) -> float | None:
+        h = self._history[limb]
+        return h[-1][0] if h else None
+
+    def clear(self) -> None:
+        for h in self._history.values():
+            h.clear()
+
+    def check(self, pulses: list[PlannedPulse], others: list[PlannedPulse] = ()) -> str | None:
+        """Why ``pulses`` (checked together) may not be written, or None if they may.
+
+        ``others`` are pulses already scheduled but not yet written; they count like
+        history.
+        """
+        cfg = self.config
+        placed: list[PlannedPulse] = list(others)
+        for p in pulses:
+            for limb in p.limbs:
+                seen = [(s, d) for s, d in self._history[limb]]
+                seen += [(q.start, q.duration) for q in placed if limb in q.limbs]
+                for s, _d in seen:
+                    gap = abs(p.start - s)
+                    if gap + _EPS < cfg.min_limb_interval_s:
+                        return (f"limb {LIMB_NAMES[limb]} was heated {gap:.3f} s before "
+                                f"(min_limb_interval_s {cfg.min_limb_interval_s:g} s)")
+                end = p.start + p.duration
+                w0 = end - cfg.duty_window_s
+                heated = p.duration + sum(_overlap(s, s + d, w0, end) for s, d in seen)
+                duty = heated / cfg.duty_window_s
+                if duty > cfg.max_duty_cycle + _EPS:
+                    return (f"limb {LIMB_NAMES[limb]} would be heated {duty * 100:.1f} % of the last "
+                            f"{cfg.duty_window_s:g} s (max_duty_cycle {cfg.max_duty_cycle * 100:g} %)")
+            placed.append(p)
+        return None
+
+    def record(self, pulse: PlannedPulse) -> None:
+        """A pulse was written at ``pulse.start``; forget pulses older than every limit.
+
+        A start earlier than the last recorded one means the clock jumped back (a simulator
+        reset); the history is then meaningless and is cleared first.
+        """
+        keep = max(self.config.duty_window_s, self.config.min_limb_interval_s) + pulse.duration
+        if any(h and pulse.start < h[-1][0] - 1.0 for h in self._history.values()):
+            self.clear()
+        for limb in pulse.limbs:
+            h = self._history[limb]
+            h.append((pulse.start, pulse.duration))
+            while h and h[0][0] < pulse.start - keep:
+                h.popleft()

@@ -1,0 +1,181 @@
+"""Turn primitives and direct limb commands into timed ``h`` pulses, safely.
+
+A primitive becomes up to two pulses: the front pair now, the rear pair one pulse length
+later (the authors' executor sleeps one pulse between the two lines, also when the front
+pair is empty). A new command cancels a pending pulse of an older one only if they
+overlap: they share a limb and their heating intervals intersect (the newer command
+wins; the limb is not heated twice back to back). Every command is checked whole by the
+:class:`~frog_bridge.core.protection.LimbGuard` (a primitive is executed entirely or not
+at all, so a refusal never turns a straight stroke into a turn), and commands older than
+``max_command_age_s`` are dropped, never replayed.
+
+Times are seconds on one clock chosen by the caller (the node's clock).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections import Counter
+from dataclasses import dataclass, field
+
+from .limbs import PRIMITIVE_NAMES, limb_names, primitive_pairs
+from .protection import LimbGuard, PlannedPulse
+
+# Reasons a command or pulse is not written (counter keys, also in diagnostics).
+REFUSED_INTERVAL = "interval"
+REFUSED_DUTY = "duty_cycle"
+REFUSED_STALE = "stale"
+REFUSED_INVALID = "invalid"
+REFUSED_LINK = "link_not_ready"
+REFUSED_STALLED = "link_stalled"
+REFUSED_EMERGENCY = "emergency"
+CANCELLED_OVERLAP = "overlap_cancelled"
+CANCELLED_LINK = "link_lost_cancelled"
+CANCELLED_EMERGENCY = "emergency_cancelled"
+CANCELLED_SHUTDOWN = "shutdown_cancelled"
+
+
+@dataclass(frozen=True)
+class TimedPulse:
+    """A pulse to write at ``due``; ``label`` says where it comes from (for logs)."""
+
+    due: float
+    limbs: tuple[int, ...]
+    duration: float
+    label: str
+    command_id: int
+
+    def planned(self) -> PlannedPulse:
+        return PlannedPulse(self.due, self.limbs, self.duration)
+
+
+@dataclass
+class Decision:
+    """Outcome of a submission: the pulses scheduled, or why none were."""
+
+    pulses: list[TimedPulse] = field(default_factory=list)
+    cancelled: list[TimedPulse] = field(default_factory=list)
+    refused: str | None = None          # a REFUSED_* key
+    reason: str = ""                    # human-readable
+
+    @property
+    def accepted(self) -> bool:
+        return self.refused is None
+
+
+class CommandScheduler:
+    """Pending pulses, ordered by due time, with protection and staleness checks.
+
+    Parameters
+    ----------
+    guard : LimbGuard
+        The per-limb limits (it also keeps the history of written pulses).
+    pulse_s : float
+        Heating pulse length [s] (what ``p`` sets).
+    max_command_age_s : float
+        A command whose stamp is older than this at submission, or a pulse not written
+        within this of its due time, is dropped.
+    """
+
+    def __init__(self, guard: LimbGuard, pulse_s: float, max_command_age_s: float):
+        if not pulse_s > 0:
+            raise ValueError(f"pulse_s {pulse_s!r} must be > 0")
+        if not max_command_age_s > 0:
+            raise ValueError(f"max_command_age_s {max_command_age_s!r} must be > 0")
+        self.guard = guard
+        self.pulse_s = pulse_s
+        self.max_command_age_s = max_command_age_s
+        self.pending: list[TimedPulse] = []
+        self.counts: Counter[str] = Counter()
+        self._ids = itertools.count(1)
+
+    # -- submissions ------------------------------------------------------------------
+    def _age_problem(self, stamp: float | None, now: float) -> str | None:
+        if stamp is None:
+            return None
+        age = now - stamp
+        if age > self.max_command_age_s:
+            return f"command is {age:.3f} s old (max_command_age_s {self.max_command_age_s:g} s)"
+        if age < -self.max_command_age_s:
+            return (f"command stamp is {-age:.3f} s in the future (do the sender and the bridge "
+                    f"use the same clock? use_sim_time)")
+        return None
+
+    def submit_primitive(self, primitive_id: int, stamp: float | None, now: float) -> Decision:
+        """Schedule primitive ``primitive_id`` (0-8) chosen at ``stamp`` (None = unknown)."""
+        try:
+            front, rear = primitive_pairs(primitive_id)
+        except ValueError as exc:
+            return self._refuse(REFUSED_INVALID, str(exc))
+        name = PRIMITIVE_NAMES[primitive_id]
+        problem = self._age_problem(stamp, now)
+        if problem:
+            return self._refuse(REFUSED_STALE, f"primitive {name}: {problem}")
+        cid = next(self._ids)
+        pulses = []
+        if front:
+            pulses.append(TimedPulse(now, front, self.pulse_s, f"{name} front", cid))
+        if rear:
+            pulses.append(TimedPulse(now + self.pulse_s, rear, self.pulse_s, f"{name} rear", cid))
+        return self._schedule(pulses, f"primitive {name}")
+
+    def submit_limbs(self, limbs, stamp: float | None, now: float) -> Decision:
+        """Schedule one pulse of ``limbs`` now (a direct limb command from a tool)."""
+        limbs = tuple(limbs)
+        if not limbs or len(set(limbs)) != len(limbs) or any(i not in (0, 1, 2, 3) for i in limbs):
+            return self._refuse(REFUSED_INVALID, f"limb ids {list(limbs)} must be distinct, in 0-3, "
+                                                 f"at least one (FL 0, FR 1, BL 2, BR 3)")
+        problem = self._age_problem(stamp, now)
+        if problem:
+            return self._refuse(REFUSED_STALE, f"limb command {limb_names(limbs)}: {problem}")
+        cid = next(self._ids)
+        pulse = TimedPulse(now, limbs, self.pulse_s, f"limbs {limb_names(limbs)}", cid)
+        return self._schedule([pulse], f"limb command {limb_names(limbs)}")
+
+    def _refuse(self, key: str, reason: str) -> Decision:
+        self.counts[key] += 1
+        return Decision(refused=key, reason=reason)
+
+    def _schedule(self, pulses: list[TimedPulse], what: str) -> Decision:
+        if not pulses:
+            return Decision()
+        cancelled = [p for p in self.pending if any(_overlaps(p, n) for n in pulses)]
+        keep = [p for p in self.pending if p not in cancelled]
+        problem = self.guard.check([p.planned() for p in pulses], [p.planned() for p in keep])
+        if problem:
+            key = REFUSED_DUTY if "max_duty_cycle" in problem else REFUSED_INTERVAL
+            return self._refuse(key, f"{what} refused: {problem}")
+        self.counts[CANCELLED_OVERLAP] += len(cancelled)
+        self.pending = sorted(keep + pulses, key=lambda p: p.due)
+        return Decision(pulses=pulses, cancelled=cancelled)
+
+    # -- execution --------------------------------------------------------------------
+    def next_due(self) -> float | None:
+        return self.pending[0].due if self.pending else None
+
+    def pop_due(self, now: float) -> tuple[list[TimedPulse], list[TimedPulse]]:
+        """Pulses due by ``now``: ``(to_write, stale)``; stale ones are dropped and counted."""
+        due = [p for p in self.pending if p.due <= now]
+        self.pending = [p for p in self.pending if p.due > now]
+        stale = [p for p in due if now - p.due > self.max_command_age_s]
+        self.counts[REFUSED_STALE] += len(stale)
+        return [p for p in due if p not in stale], stale
+
+    def written(self, pulse: TimedPulse, at: float) -> None:
+        """``pulse`` was written at ``at`` (recorded for the limits)."""
+        self.guard.record(PlannedPulse(at, pulse.limbs, pulse.duration))
+
+    def cancel_all(self, key: str) -> list[TimedPulse]:
+        """Drop every pending pulse (link lost, emergency, shutdown); count under ``key``."""
+        dropped, self.pending = self.pending, []
+        self.counts[key] += len(dropped)
+        return dropped
+
+    def count_refusal(self, key: str) -> None:
+        self.counts[key] += 1
+
+
+def _overlaps(a: TimedPulse, b: TimedPulse) -> bool:
+    if a.command_id == b.command_id or not set(a.limbs) & set(b.limbs):
+        return False
+    return a.due < b.due + b.duration and b.due < a.due + a.duration

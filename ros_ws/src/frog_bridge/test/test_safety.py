@@ -1,0 +1,182 @@
+"""Scheduler, limb protection and link supervision (no ROS)."""
+
+import numpy as np
+import pytest
+
+from frog_bridge.core.link import LinkState, LinkSupervisor
+from frog_bridge.core.protection import LimbGuard, PlannedPulse, ProtectionConfig
+from frog_bridge.core.schedule import (
+    CANCELLED_OVERLAP, REFUSED_DUTY, REFUSED_INTERVAL, REFUSED_INVALID, REFUSED_STALE, CommandScheduler)
+
+P = 0.08
+B, C, D, H, I_ = 1, 2, 3, 7, 8
+
+
+def sched(interval=0.8, duty=0.10, window=10.0, age=0.5):
+    return CommandScheduler(LimbGuard(ProtectionConfig(interval, duty, window)), P, age)
+
+
+def run(s, now):
+    """Write everything due by ``now`` (as the node does) and return (due, limbs) pairs."""
+    out, _stale = s.pop_due(now)
+    for p in out:
+        s.written(p, p.due)
+    return [(round(p.due, 6), p.limbs) for p in out]
+
+
+def test_primitive_front_now_rear_one_pulse_later():
+    s = sched()
+    d = s.submit_primitive(B, stamp=9.99, now=10.0)
+    assert d.accepted
+    assert [(p.due, p.limbs) for p in d.pulses] == [(10.0, (1, 0)), (pytest.approx(10.08), (2, 3))]
+    assert run(s, 10.0) == [(10.0, (1, 0))]
+    assert s.next_due() == pytest.approx(10.08)
+    assert run(s, 10.081) == [(10.08, (2, 3))]
+    assert s.submit_primitive(I_, None, 11.0).pulses == []       # I sends nothing
+
+
+def test_too_fast_repeat_is_refused_whole_and_counted():
+    s = sched()
+    s.submit_primitive(B, None, 0.0)
+    run(s, 0.1)
+    d = s.submit_primitive(D, None, 0.5)            # FR again after 0.5 s < 0.8 s
+    assert not d.accepted and d.refused == REFUSED_INTERVAL and "FR" in d.reason
+    assert s.pending == []                          # nothing of D is scheduled (no rear only)
+    assert s.counts[REFUSED_INTERVAL] == 1
+    assert s.submit_primitive(D, None, 0.81).accepted   # the limit, not a lockout
+
+
+def test_duty_cycle_bound_is_a_sliding_window():
+    # interval off; 20 % duty over 1 s allows two 80 ms pulses per second per limb
+    s = sched(interval=0.0, duty=0.2, window=1.0)
+    t, accepted = 0.0, 0
+    for _ in range(5):                               # H (FR) every 0.1 s
+        d = s.submit_primitive(H, None, t)
+        accepted += d.accepted
+        run(s, t)
+        t += 0.1
+    assert accepted == 2
+    assert s.counts[REFUSED_DUTY] == 3
+    # after the window has passed the limb may be heated again
+    assert s.submit_primitive(H, None, 1.25).accepted
+
+
+def test_default_limits_let_the_authors_gait_through():
+    """1.2 Hz (the fastest cycle of the 10 % limbs) and the planner's 1.43 s pass for 60 s."""
+    for period in (1 / 1.2, 1.43, 1.125):
+        s = sched()
+        t = 0.0
+        while t < 60:
+            assert s.submit_primitive(B, None, t).accepted, (period, t)
+            run(s, t + 0.2)
+            t += period
+    # but a sustained 0.8 s train is cut by the duty bound (80 ms / 0.8 s = 10 % > 9.6 %)
+    s = sched()
+    results = []
+    for k in range(40):
+        results.append(s.submit_primitive(H, None, 0.8 * k).accepted)
+        run(s, 0.8 * k)
+    assert all(results[:12]) and not all(results)
+
+
+def test_new_primitive_cancels_a_pending_rear_only_if_they_overlap():
+    s = sched(interval=0.0, duty=1.0)
+    s.submit_primitive(B, None, 0.0)
+    run(s, 0.0)                                      # B's rear (BL, BR) pending at 0.08
+    d = s.submit_primitive(H, None, 0.03)            # H: FR only: no overlap
+    assert d.accepted and d.cancelled == []
+    run(s, 0.03)
+    d = s.submit_primitive(C, None, 0.05)            # C's rear BL+BR at 0.13 overlaps B's rear
+    assert d.accepted and [p.label for p in d.cancelled] == ["B rear"]
+    assert s.counts[CANCELLED_OVERLAP] == 1
+    assert [p.label for p in s.pending] == ["C front", "C rear"]
+    # a refused command cancels nothing
+    s = sched()
+    s.submit_primitive(B, None, 0.0)
+    run(s, 0.0)
+    d = s.submit_primitive(B, None, 0.05)
+    assert not d.accepted and [p.label for p in s.pending] == ["B rear"]
+
+
+def test_stale_commands_are_dropped_not_replayed():
+    s = sched(age=0.5)
+    d = s.submit_primitive(B, stamp=1.0, now=2.0)
+    assert d.refused == REFUSED_STALE and "1.000 s old" in d.reason
+    d = s.submit_primitive(B, stamp=10.0, now=2.0)
+    assert d.refused == REFUSED_STALE and "future" in d.reason
+    # a pulse not written in time (the executor was blocked) is dropped when finally due
+    s.submit_primitive(B, stamp=None, now=3.0)
+    out, stale = s.pop_due(5.0)
+    assert out == [] and len(stale) == 2 and s.counts[REFUSED_STALE] == 4
+
+
+def test_invalid_limb_commands():
+    s = sched()
+    for limbs in ([], [0, 0], [4]):
+        assert s.submit_limbs(limbs, None, 0.0).refused == REFUSED_INVALID
+    assert s.submit_primitive(9, None, 0.0).refused == REFUSED_INVALID
+    d = s.submit_limbs([0, 2], None, 0.0)
+    assert d.accepted and d.pulses[0].limbs == (0, 2)
+
+
+def test_guard_clock_jump_back_clears_history():
+    g = LimbGuard(ProtectionConfig(0.8, 0.1, 10.0))
+    g.record(PlannedPulse(100.0, (0,), P))
+    assert g.check([PlannedPulse(100.5, (0,), P)])
+    g.record(PlannedPulse(1.0, (1,), P))              # simulator reset: time 100 -> 1
+    assert g.check([PlannedPulse(1.0, (0,), P)]) is None
+
+
+def test_random_commands_never_break_the_limits():
+    """Property: whatever is submitted, written pulses per limb respect both limits."""
+    rng = np.random.default_rng(7)
+    cfg = ProtectionConfig(0.8, 0.1, 10.0)
+    s = CommandScheduler(LimbGuard(cfg), P, 0.5)
+    written = {i: [] for i in range(4)}
+    t = 0.0
+    for _ in range(3000):
+        t += float(rng.exponential(0.15))
+        for p in s.pop_due(t)[0]:
+            s.written(p, p.due)
+            for limb in p.limbs:
+                written[limb].append(p.due)
+        if rng.random() < 0.7:
+            s.submit_primitive(int(rng.integers(9)), None, t)
+        else:
+            s.submit_limbs(list(rng.choice(4, size=rng.integers(1, 4), replace=False)), None, t)
+    for limb, starts in written.items():
+        starts = np.array(starts)
+        assert len(starts) > 50
+        assert np.diff(starts).min() >= 0.8 - 1e-9
+        for t0 in starts:                            # any window ending at a pulse end
+            inside = starts[(starts > t0 + P - 10.0 - P) & (starts <= t0)]
+            assert len(inside) * P / 10.0 <= 0.1 + 1e-9
+
+
+def test_link_state_machine_and_backoff():
+    link = LinkSupervisor(reconnect_period_s=0.5, reconnect_max_period_s=2.0, settle_s=0.2,
+                          stall_timeout_s=1.0)
+    assert link.state is LinkState.DISCONNECTED and link.should_attempt(0.0)
+    delays = []
+    t = 0.0
+    for _ in range(5):
+        link.open_failed(t, "no such file")
+        delays.append(link.next_attempt - t)
+        t = link.next_attempt
+    assert delays == [0.5, 1.0, 2.0, 2.0, 2.0]
+    link.opened(t)
+    assert link.state is LinkState.CONNECTING and not link.can_actuate
+    assert not link.settled(t + 0.1) and link.settled(t + 0.2)
+    link.ready(t + 0.2)
+    assert link.can_actuate and link.failures == 0
+    assert not link.stalled(t + 1.0) and link.stalled(t + 1.3)
+    link.line_received(t + 1.3)
+    assert not link.stalled(t + 1.4) and link.line_age(t + 1.4) == pytest.approx(0.1)
+    assert link.emergency("Central: EMERGENCY") and not link.emergency("again")
+    assert link.state is LinkState.EMERGENCY and not link.can_actuate
+    link.lost(t + 2.0, "EIO")                      # the latch survives a disconnect
+    assert link.state is LinkState.EMERGENCY and link.next_attempt == pytest.approx(t + 2.5)
+    assert link.clear_emergency() and link.state is LinkState.DISCONNECTED
+    assert not link.clear_emergency()
+    with pytest.raises(ValueError):
+        LinkSupervisor(reconnect_period_s=2.0, reconnect_max_period_s=1.0)

@@ -1,0 +1,105 @@
+"""SerialLink against a real pty (PtyDevice): read, write, unplug, reconnect (no ROS)."""
+
+import os
+import select
+import threading
+import time
+
+import pytest
+
+from frog_bridge.core.link import LinkState, LinkSupervisor
+from frog_bridge.core.pty_device import OpenedDevice, PtyDevice
+from frog_bridge.core.serial_link import SerialLink
+
+
+def wait_for(pred, timeout=5.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(0.01)
+    return pred()
+
+
+def read_device(dev, timeout=2.0):
+    end = time.monotonic() + timeout
+    got = b""
+    while time.monotonic() < end and not got.endswith(b"\n"):
+        if select.select([dev.controller], [], [], 0.05)[0]:
+            got += dev.read()
+    return got
+
+
+@pytest.fixture
+def device(tmp_path):
+    dev = PtyDevice(str(tmp_path / "tty"))
+    dev.plug()
+    yield dev
+    dev.unplug()
+
+
+def test_read_write_unplug_replug(device):
+    events, woken = [], threading.Event()
+    sup = LinkSupervisor(reconnect_period_s=0.1, reconnect_max_period_s=0.2, settle_s=0.0)
+    link = SerialLink(device.link_path, 115200, sup, woken.set)
+    link.start()
+    try:
+        def collect():
+            events.extend(link.events())
+            return events
+        assert wait_for(lambda: any(e.kind == "opened" for e in collect()))
+        assert sup.state is LinkState.CONNECTING
+        sup.ready(time.monotonic())
+        assert link.write_line(b"h 1 0\n") is None
+        assert read_device(device) == b"h 1 0\n"
+        device.write(b"Central: Q 1 0 0 0\r\n")
+        assert wait_for(lambda: b"".join(e.data for e in collect()) == b"Central: Q 1 0 0 0\r\n")
+
+        device.unplug()
+        assert wait_for(lambda: any(e.kind == "lost" for e in collect()))
+        assert sup.state is LinkState.DISCONNECTED
+        assert link.write_line(b"h 1\n") == "port is not open"
+        events.clear()
+        time.sleep(0.35)                               # a few failed retries (no such file)
+        assert any(e.kind == "open_failed" for e in collect())
+        device.write(b"stale\n")                      # dropped: unplugged devices take nothing
+        device.plug()
+        assert wait_for(lambda: any(e.kind == "opened" for e in collect()), 1.0)
+        sup.ready(time.monotonic())
+        assert link.write_line(b"h 2 3\n") is None
+        assert read_device(device) == b"h 2 3\n"
+        assert not any(e.kind == "data" and b"stale" in e.data for e in collect())
+    finally:
+        link.stop()
+
+
+def test_write_to_a_stuck_reader_times_out_and_loses_the_link(device):
+    sup = LinkSupervisor(reconnect_period_s=5.0, reconnect_max_period_s=5.0, settle_s=0.0)
+    link = SerialLink(device.link_path, 115200, sup, lambda: None, write_timeout_s=0.05)
+    link.start()
+    try:
+        assert wait_for(lambda: sup.connection is LinkState.CONNECTING)
+        # nobody reads the controller side: the pty buffer fills and a write times out
+        problem = None
+        for _ in range(10_000):
+            problem = link.write_line(b"h 1 0\n" * 100)
+            if problem:
+                break
+        assert problem and "write" in problem
+        assert wait_for(lambda: sup.connection is LinkState.DISCONNECTED)
+    finally:
+        link.stop()
+
+
+def test_opened_device_mode():
+    controller, dev_fd = os.openpty()
+    try:
+        dev = OpenedDevice(os.ttyname(dev_fd))
+        dev.plug()
+        dev.write(b"Central: EMERGENCY\r\n")
+        assert os.read(controller, 100) == b"Central: EMERGENCY\r\n"
+        dev.unplug()
+        assert not dev.plugged and dev.write(b"x") == 0
+    finally:
+        os.close(controller)
+        os.close(dev_fd)

@@ -1,0 +1,139 @@
+"""The tracking pipeline: image -> tag -> body pose -> filtered state.
+
+Once the robot is tracked, the tag is searched for in a window around its predicted
+position (a few times the tag's size in pixels), which keeps detection to a few
+milliseconds per frame; the whole image is searched when the window fails or nothing is
+tracked.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from frog_vision.core.camera_model import CameraModel
+from frog_vision.core.detection import DetectorSettings, TagDetector
+from frog_vision.core.pose import PoseMeasurement, PoseSettings, TagPoseEstimator, compose_offset, invert_pose
+from frog_vision.core.state_filter import FilterSettings, PoseFilter, RobotState
+from frog_vision.core.tank_calibration import CameraPose
+
+
+@dataclasses.dataclass(frozen=True)
+class TrackResult:
+    """What one frame gave.
+
+    Attributes
+    ----------
+    stamp : float
+        Capture time [s].
+    state : RobotState or None
+        Filtered state at ``stamp`` (``None`` when nothing is tracked or the tag has been
+        lost for longer than the coast timeout: publish nothing then).
+    measurement : PoseMeasurement or None
+        This frame's tag pose, if the tag was found and accepted.
+    reason : str or None
+        Why this frame gave no accepted measurement.
+    n_detections : int
+        Tags of the wanted family and id found.
+    corners : ndarray (4, 2) or None
+        Detected corners of the used tag.
+    compute_s : float
+        Detection + estimation time [s].
+    """
+
+    stamp: float
+    state: RobotState | None
+    measurement: PoseMeasurement | None
+    reason: str | None
+    n_detections: int
+    corners: np.ndarray | None
+    compute_s: float
+
+
+class Tracker:
+    """Track the robot's tag through a stream of images.
+
+    Parameters
+    ----------
+    camera : CameraModel
+    camera_pose : CameraPose
+        From the tank calibration.
+    detector, pose, filter : settings of the three stages
+    search_window : float
+        Side of the search window in tag sizes (0 = always search the whole image).
+    """
+
+    def __init__(self, camera: CameraModel, camera_pose: CameraPose,
+                 detector: DetectorSettings | None = None, pose: PoseSettings | None = None,
+                 filter: FilterSettings | None = None, search_window: float = 3.0):
+        self.detector = TagDetector(detector)
+        self.estimator = TagPoseEstimator(camera, camera_pose, pose)
+        self.filter = PoseFilter(filter)
+        self.search_window = search_window
+        self.camera = camera
+        self.camera_pose = camera_pose
+        self.n_frames = 0
+        self.n_measured = 0
+
+    def set_camera(self, camera: CameraModel) -> None:
+        """Use a new intrinsic model (camera_info changed)."""
+        self.camera = camera
+        self.estimator = TagPoseEstimator(camera, self.camera_pose, self.estimator.settings)
+
+    def _window(self, stamp: float):
+        """Search window (x0, y0, x1, y1) around the predicted tag, or None."""
+        if self.search_window <= 0 or not self.filter.initialised:
+            return None
+        st = self.filter.state(stamp)
+        if st is None:
+            return None
+        ps = self.estimator.settings
+        tag, _ = compose_offset(st.pose, invert_pose((ps.offset_x, ps.offset_y, ps.offset_yaw)))
+        half = self.search_window * ps.tag_size * 0.75
+        ring = tag[:2] + half * np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]])
+        uv = self.camera_pose.project(self.camera, np.column_stack([ring, np.full(4, ps.tag_height)]))
+        if not np.all(np.isfinite(uv)):
+            return None
+        x0, y0 = uv.min(axis=0)
+        x1, y1 = uv.max(axis=0)
+        return int(x0), int(y0), int(np.ceil(x1)) + 1, int(np.ceil(y1)) + 1
+
+    def process(self, image: np.ndarray, stamp: float) -> TrackResult:
+        """Detect, measure and filter one frame captured at ``stamp`` [s].
+
+        Raises
+        ------
+        ValueError
+            The image is not uint8 grey/BGR or does not match the camera model's size.
+        """
+        self.camera.check_image(image)
+        t0 = time.perf_counter()
+        self.n_frames += 1
+        window = self._window(stamp)
+        dets = self.detector.detect(image, window) if window is not None else []
+        if not dets and window is not None:
+            dets = self.detector.detect(image)
+        elif window is None:
+            dets = self.detector.detect(image)
+        meas, reason, used = None, None, None
+        for d in dets:
+            meas, reason = self.estimator.measure(d)
+            if meas is not None:
+                used = d
+                break
+        if not dets:
+            reason = "tag not found"
+        state = None
+        if meas is not None:
+            state, why = self.filter.update(stamp, meas.pose, meas.covariance)
+            if why is None:
+                self.n_measured += 1
+            else:
+                reason = why
+        elif self.filter.initialised:
+            state = self.filter.state(stamp, coasting=True)
+            if state is None and stamp - self.filter.last_measurement > self.filter.settings.reset_timeout:
+                self.filter.reset()
+        return TrackResult(stamp, state, meas if reason is None else None, reason, len(dets),
+                           None if used is None else used.corners, time.perf_counter() - t0)

@@ -1,0 +1,223 @@
+"""``camera_sim``: the overhead camera of the digital twin.
+
+Subscribes to the simulator's ground truth (``frog/sim/odom``: COM pose in ``tank``, body
+twist) and rod network (``frog/sim/shape``), and publishes rendered frames on
+``camera/image_raw`` (bgr8) with ``camera/camera_info``, at ``fps`` on the node clock (the
+simulated time with ``use_sim_time``), stamped with the capture time. The robot is drawn
+where the odometry says it is at that time (extrapolated with its twist from the last
+message), with the shape's outline carried rigidly from the shape's own time.
+"""
+from __future__ import annotations
+
+import bisect
+import collections
+import math
+import sys
+import time
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from nav_msgs.msg import Odometry
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, Image
+from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from visualization_msgs.msg import Marker
+
+from frog_vision.core.camera_model import CameraModel
+from frog_vision.core.pose import compose_offset
+from frog_vision.core.renderer import Occluder, RenderSettings, TankRenderer, integrate_twist
+from frog_vision.core.robot_shape import RobotShape, shape_from_segments
+from frog_vision.core.tank_calibration import Board
+from frog_vision.nodes.common import load_camera, load_camera_pose
+from frog_vision.nodes.messages import array_to_image, camera_info_msg, s_to_stamp, stamp_to_s, yaw_of
+from frog_vision.nodes.settings import CAMERA_PARAMS, TAG_PARAMS
+
+PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
+    Param("board_file", "", "calibration board drawn in the tank (YAML); empty = the default board"),
+    Param("fps", 30.0, "frame rate in node-clock time [Hz]", min=1.0, max=240.0),
+    Param("frame_id", "camera", "frame of the images"),
+    Param("exposure", 0.010, "exposure time (motion blur) [s]", min=0.0, max=0.2),
+    Param("blur_samples", 5, "poses averaged over the exposure", min=1, max=32),
+    Param("noise_sigma", 2.0, "sensor noise [grey levels]", min=0.0, max=50.0),
+    Param("brightness", 1.0, "global lighting gain", min=0.05, max=2.0),
+    Param("lighting", 0.3, "uneven lighting: gain drop from the hot spot to the darkest corner", min=0.0, max=0.99),
+    Param("corner_jitter_px", 0.0, "per-frame random tag displacement (vibration, ripples) [px]", min=0.0, max=5.0),
+    Param("drop_probability", 0.0, "chance that a frame is lost", min=0.0, max=0.99),
+    Param("seed", 0, "random seed (noise, drops, water texture)", min=0, max=2**31 - 1),
+    Param("occlusion_start_s", -1.0, "hide the robot under an occluder from this node-clock time [s]; < 0 = never",
+          min=-1.0, max=1e9),
+    Param("occlusion_duration_s", 1.0, "for this long [s]", min=0.0, max=1e6),
+]
+
+
+class CameraSimNode(Node):
+    NODE_NAME = "camera_sim"
+
+    def __init__(self):
+        super().__init__("camera_sim")
+        p = declare_parameters(self, PARAMS)
+        self.cfg = p
+        camera = load_camera(p["camera_info_file"]) or CameraModel.realsense_640x480()
+        pose = load_camera_pose(p["tank_calibration_file"])
+        try:
+            board = Board.from_yaml(p["board_file"] or None)
+            settings = RenderSettings(
+                tag_family=p["tag_family"], tag_id=p["tag_id"], tag_size=p["tag_size"], tag_height=p["tag_height"],
+                exposure=p["exposure"], blur_samples=p["blur_samples"], noise_sigma=p["noise_sigma"],
+                brightness=p["brightness"], lighting=p["lighting"], corner_jitter_px=p["corner_jitter_px"],
+                drop_probability=p["drop_probability"], seed=p["seed"])
+            self.renderer = TankRenderer(camera, pose, settings, board)
+        except (OSError, ValueError) as exc:
+            raise ConfigurationError(str(exc)) from exc
+        self.camera = camera
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.image_pub = self.create_publisher(Image, "camera/image_raw", QoSProfile(depth=2))
+        self.info_pub = self.create_publisher(CameraInfo, "camera/camera_info", QoSProfile(depth=2))
+        self.create_subscription(Odometry, "frog/sim/odom", self.on_odom, qos)
+        self.create_subscription(Marker, "frog/sim/shape", self.on_shape, qos)
+        self.odom = collections.deque(maxlen=200)          # (t, pose, twist)
+        self.shape: RobotShape | None = None
+        self.tag_offset = None
+        self.frames = 0
+        self.skipped = 0
+        self.next_capture = None
+        self.waiting_logged = False
+        self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.busy_s = 0.0
+        self.render_s = 0.0
+        self.cpu_s = 0.0
+        self._diag_frames, self._diag_busy, self._diag_wall = 0, 0.0, time.monotonic()
+        self.create_timer(0.5 / p["fps"], self.tick)
+        # diagnostics on the wall clock: they report the node's own load
+        self.create_timer(1.0, self.publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(f"rendering {camera.width}x{camera.height} at {p['fps']:g} fps "
+                               f"(tag {p['tag_family']} id {p['tag_id']}, noise {p['noise_sigma']:g})")
+
+    def on_odom(self, msg: Odometry) -> None:
+        p = msg.pose.pose
+        tw = msg.twist.twist
+        self.odom.append((stamp_to_s(msg.header.stamp), np.array([p.position.x, p.position.y, yaw_of(p.orientation)]),
+                          np.array([tw.linear.x, tw.linear.y, tw.angular.z])))
+
+    def on_shape(self, msg: Marker) -> None:
+        if msg.type != Marker.LINE_LIST or len(msg.points) < 6 or len(msg.points) % 2:
+            self.get_logger().error(f"ignored shape: expected a LINE_LIST with an even number of points, got type "
+                                    f"{msg.type} with {len(msg.points)} points")
+            return
+        if not self.odom:
+            return
+        t = stamp_to_s(msg.header.stamp)
+        ref = min(self.odom, key=lambda o: abs(o[0] - t))     # the COM pose at the shape's time
+        if abs(ref[0] - t) > 0.1:
+            return
+        pts = np.array([[q.x, q.y] for q in msg.points])
+        try:
+            world = shape_from_segments(pts.reshape(-1, 2, 2))
+        except ValueError as exc:
+            self.get_logger().error(f"ignored shape: {exc}")
+            return
+        self.shape = _to_local(world, ref[1])
+        c = self.shape.ring_centre
+        self.tag_offset = (float(c[0]), float(c[1]), 0.0)
+
+    def tick(self) -> None:
+        """Render every frame whose capture time (a grid of 1/fps in node-clock time) has come.
+
+        The simulator's /clock advances in steps (its publication period), so frames are
+        taken on the exact grid rather than at the timer's firing times; a frame more than
+        two periods late is skipped (counted), never rendered late with a stale stamp. A frame
+        waits until odometry at or after its capture time has arrived, and the pose is
+        interpolated between the two odometry messages around it (exact ground truth even
+        when the odometry is delayed)."""
+        t = self.get_clock().now().nanoseconds * 1e-9
+        if not self.odom:
+            if not self.waiting_logged:
+                self.get_logger().info("waiting for frog/sim/odom")
+                self.waiting_logged = True
+            return
+        period = 1.0 / self.cfg["fps"]
+        if self.next_capture is None or t < self.next_capture - 10 * period:   # start, or time jumped back
+            self.next_capture = math.ceil(t / period) * period
+        if t - self.next_capture > 2 * period:
+            missed = int((t - self.next_capture) / period) - 1
+            self.skipped += missed
+            self.next_capture += missed * period
+        while self.next_capture <= t + 1e-9 and self.next_capture <= self.odom[-1][0] + 1e-9:
+            self.capture(self.next_capture)
+            self.next_capture += period
+
+    def capture(self, t: float) -> None:
+        pose_now, twist = _interpolate(self.odom, t)
+        if self.renderer.should_drop():
+            return
+        occ = []
+        start = self.cfg["occlusion_start_s"]
+        if start >= 0 and start <= t < start + self.cfg["occlusion_duration_s"]:
+            tag, _ = compose_offset(pose_now, self.tag_offset or (0.0, 0.0, 0.0))
+            occ = [Occluder(tag[0], tag[1], 0.07)]
+        w0 = time.perf_counter()
+        c0 = time.process_time()
+        img = self.renderer.render(pose_now, twist, self.shape, self.tag_offset, occ)
+        self.render_s += time.perf_counter() - w0
+        stamp = s_to_stamp(t)
+        self.image_pub.publish(array_to_image(img, stamp, self.cfg["frame_id"]))
+        self.info_pub.publish(camera_info_msg(self.camera, stamp, self.cfg["frame_id"]))
+        self.frames += 1
+        self.busy_s += time.perf_counter() - w0
+        self.cpu_s += time.process_time() - c0
+
+    def publish_diagnostics(self) -> None:
+        wall = time.monotonic()
+        frames, busy = self.frames - self._diag_frames, self.busy_s - self._diag_busy
+        span = wall - self._diag_wall
+        self._diag_frames, self._diag_busy, self._diag_wall = self.frames, self.busy_s, wall
+        status = DiagnosticStatus(name=f"{self.get_name()}: camera simulator", hardware_id="camera_sim",
+                                  level=DiagnosticStatus.OK if self.odom else DiagnosticStatus.WARN,
+                                  message="rendering" if self.odom else "waiting for frog/sim/odom")
+        status.values = [KeyValue(key="frames", value=str(self.frames)),
+                         KeyValue(key="frames_per_wall_s", value=f"{frames / span:.1f}" if span > 0 else "nan"),
+                         KeyValue(key="render_publish_ms",
+                                  value=f"{busy / frames * 1e3:.2f}" if frames else "nan"),
+                         KeyValue(key="cpu_ms_mean", value=f"{self.cpu_s / max(self.frames, 1) * 1e3:.2f}"),
+                         KeyValue(key="render_ms_mean", value=f"{self.render_s / max(self.frames, 1) * 1e3:.2f}"),
+                         KeyValue(key="frames_skipped", value=str(self.skipped)),
+                         KeyValue(key="shape_received", value=str(self.shape is not None))]
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diag_pub.publish(msg)
+
+
+def _interpolate(odom, t: float):
+    """Pose and twist at ``t`` between the odometry samples around it (before the first one:
+    moved back with its twist)."""
+    times = [o[0] for o in odom]
+    i = bisect.bisect_right(times, t + 1e-9)
+    if i == 0:
+        t0, pose, twist = odom[0]
+        return integrate_twist(pose, twist, max(t - t0, -0.2)), twist
+    t0, p0, v0 = odom[i - 1]
+    if i == len(odom) or abs(t - t0) < 1e-9:
+        return integrate_twist(p0, v0, min(t - t0, 0.2)), v0
+    t1, p1, v1 = odom[i]
+    w = (t - t0) / (t1 - t0)
+    d = p1 - p0
+    d[2] = math.remainder(d[2], 2 * math.pi)
+    return p0 + w * d, v0 + w * (v1 - v0)
+
+
+def _to_local(world: RobotShape, com_pose) -> RobotShape:
+    """A tank-frame shape expressed in the body frame at ``com_pose``."""
+    c, s = np.cos(com_pose[2]), np.sin(com_pose[2])
+    rot = np.array([[c, -s], [s, c]])            # body -> tank; row vectors: (p - t) @ rot
+    t = np.asarray(com_pose[:2])
+    return RobotShape((world.ring - t) @ rot, (world.limbs - t) @ rot)
+
+
+def main(args=None) -> int:
+    return run_node(CameraSimNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,236 @@
+"""frog_vision as real node processes: the twin's camera (sim_node -> camera_sim ->
+tracker_node on simulated time) against the simulator's ground truth, and bad input."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import Odometry
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, Image
+
+pytestmark = pytest.mark.system
+
+QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def _t(stamp):
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def _yaw(q):
+    return 2 * math.atan2(q.z, q.w)
+
+
+def _odom_arrays(msgs):
+    t = np.array([_t(m.header.stamp) for m in msgs])
+    p = np.array([[m.pose.pose.position.x, m.pose.pose.position.y, _yaw(m.pose.pose.orientation)] for m in msgs])
+    v = np.array([[m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.angular.z] for m in msgs])
+    return t, p, v
+
+
+def test_twin_camera_tracks_the_simulated_frog(launch, probe):
+    sim = launch("sim_node", params={"publish_clock": True, "gait_frequency_hz": 1.0, "initial_x": -0.05,
+                                     "initial_y": -0.1, "initial_heading": 0.4, "real_time_factor": 0.5})
+    cam = launch("camera_sim", params={"use_sim_time": True, "occlusion_start_s": 5.0,
+                                       "occlusion_duration_s": 1.0})
+    trk = launch("tracker_node", params={"use_sim_time": True})
+    truth, est, infos, diags = [], [], [], []
+    probe.node.create_subscription(Odometry, "/frog/sim/odom", truth.append, QOS)
+    probe.node.create_subscription(Odometry, "/frog/odom", est.append, QOS)
+    # camera_info carries the image stamps; the test does not take the 0.9 MB images themselves
+    probe.node.create_subscription(CameraInfo, "/camera/camera_info", infos.append, QOS)
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
+    images = infos
+    sim.wait_for_log("simulating the frog", timeout=120)
+    cam.wait_for_log("rendering 640x480", timeout=60)
+    trk.wait_for_log("camera model from camera_info", timeout=60)
+    probe.spin_until(lambda: len(truth) > 0 and _t(truth[-1].header.stamp) > 8.0, timeout=90, what="8 s of sim")
+    for d in diags[-6:]:
+        for s in d.status:
+            print(s.name, s.message, [(v.key, v.value) for v in s.values])
+
+    # frames are stamped with simulated time at 30 fps of simulated time
+    st = np.array([_t(s.header.stamp) for s in images])
+    st = st[st > 1.0]
+    assert abs(np.median(np.diff(st)) - 1 / 30) < 2e-3
+    assert infos[-1].width == 640 and infos[-1].k[0] > 0
+    # odometry stamps are capture stamps (every one is an image stamp)
+    t_e, p_e, v_e = _odom_arrays(est)
+    seen = np.array([_t(s.header.stamp) for s in images])
+    assert set(np.round(t_e[t_e >= seen[0]], 6)) <= set(np.round(seen, 6))   # (frames before the probe matched)
+    t_s, p_s, v_s = _odom_arrays(truth)
+    ok = (t_e > 1.0) & (t_e < 5.0)           # before the occlusion
+    interp = np.column_stack([np.interp(t_e[ok], t_s, p_s[:, i]) for i in range(2)])
+    err = np.linalg.norm(p_e[ok, :2] - interp, axis=1)
+    heading = np.interp(t_e[ok], t_s, np.unwrap(p_s[:, 2]))
+    herr = np.degrees(np.abs(np.angle(np.exp(1j * (p_e[ok, 2] - heading)))))
+    vt = np.column_stack([np.interp(t_e[ok], t_s, v_s[:, i]) for i in range(3)])
+    verr = np.linalg.norm(v_e[ok, :2] - vt[:, :2], axis=1)
+    print(f"\ntwin tracking vs ground truth over {ok.sum()} frames: position mean {err.mean() * 1e3:.2f} mm, "
+          f"max {err.max() * 1e3:.2f} mm; heading mean {herr.mean():.3f} deg; velocity RMS "
+          f"{np.sqrt(np.mean(verr ** 2)) * 1e3:.2f} mm/s (speed RMS {np.sqrt(np.mean(vt[:, 0] ** 2)) * 1e3:.1f} mm/s)")
+    assert err.mean() < 1.5e-3 and herr.mean() < 0.5
+    assert np.ptp(p_s[:, 0]) > 0.01, "the gait should move the frog"
+    # occlusion 5-6 s: odometry stops after the coast timeout, diagnostics say lost, and
+    # tracking resumes within 3 frames
+    gap = (t_e > 5.0) & (t_e < 6.0)
+    assert not np.any(t_e[gap] > 5.0 + 0.5 + 1e-3)
+    lost = [s for d in diags for s in d.status if "tag tracking" in s.name and "lost" in s.message]
+    assert lost, "diagnostics never reported the tag lost"
+    after = t_e[t_e >= 6.0]
+    assert len(after) and after[0] - 6.0 <= 3 / 30 + 1e-3
+    for p in (trk, cam, sim):
+        assert p.stop() == 0
+
+
+def _publish_until_logged(probe, proc, pattern, publish, timeout=15.0):
+    """Publish (best-effort subscriber: the first messages may be lost) until ``proc`` logs ``pattern``."""
+    import re
+    import time
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        publish()
+        probe.spin_for(0.1)
+        if re.search(pattern, proc.log_text()):
+            return
+    raise AssertionError(f"{proc.name} did not log {pattern!r}:\n{proc.log_text()[-2000:]}")
+
+
+def _publish_frames(probe, pub_img, pub_info, frames, model, t0, fps=30.0):
+    from frog_vision.nodes.messages import array_to_image, camera_info_msg, s_to_stamp
+    for i, f in enumerate(frames):
+        stamp = s_to_stamp(t0 + i / fps)
+        pub_info.publish(camera_info_msg(model, stamp, "camera"))
+        pub_img.publish(array_to_image(f, stamp, "camera"))
+        probe.spin_for(1 / fps)
+
+
+def test_tracker_bad_input_and_lost_tag(launch, probe):
+    from frog_vision.core.camera_model import CameraModel
+    from frog_vision.core.renderer import RenderSettings, TankRenderer
+    from frog_vision.core.tank_calibration import CameraPose
+    model = CameraModel.realsense_640x480()
+    renderer = TankRenderer(model, CameraPose.overhead(0.8), RenderSettings(noise_sigma=2.0))
+    trk = launch("tracker_node", params={"coast_timeout": 0.3, "reset_timeout": 1.0, "publish_debug_image": True})
+    est, diags, debug = [], [], []
+    probe.node.create_subscription(Image, "/frog/tracker/debug_image", debug.append, QOS)
+    probe.node.create_subscription(Odometry, "/frog/odom", est.append, QOS)
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
+    pub_img = probe.node.create_publisher(Image, "/camera/image_raw", 10)
+    pub_info = probe.node.create_publisher(CameraInfo, "/camera/camera_info", 10)
+    trk.wait_for_log("tracking tagStandard41h12 id 47", timeout=60)
+    probe.wait_for_subscriber("/camera/image_raw", timeout=20)
+    # an image before any camera_info, then an unexpected encoding and a size mismatch
+    from frog_vision.nodes.messages import array_to_image, camera_info_msg, s_to_stamp
+    black = array_to_image(np.zeros((480, 640, 3), np.uint8), s_to_stamp(1.0), "camera")
+    _publish_until_logged(probe, trk, "no camera_info received yet", lambda: pub_img.publish(black))
+    _publish_until_logged(probe, trk, "camera model from camera_info",
+                          lambda: pub_info.publish(camera_info_msg(model, s_to_stamp(1.0), "camera")))
+    bad = array_to_image(np.zeros((480, 640, 3), np.uint8), s_to_stamp(1.1), "camera")
+    bad.encoding = "32FC1"
+    _publish_until_logged(probe, trk, r"image encoding '32FC1' is not supported", lambda: pub_img.publish(bad))
+    small = array_to_image(np.zeros((240, 320, 3), np.uint8), s_to_stamp(1.2), "camera")
+    _publish_until_logged(probe, trk, r"image is 320x240 but the camera model is 640x480",
+                          lambda: pub_img.publish(small))
+    truncated = array_to_image(np.zeros((480, 640, 3), np.uint8), s_to_stamp(1.25), "camera")
+    truncated.data = truncated.data[:1000]
+    _publish_until_logged(probe, trk, r"image data has 1000 bytes", lambda: pub_img.publish(truncated))
+    assert trk.running()
+    # good frames of a robot moving at 2 cm/s: odometry with the capture stamps
+    poses = [np.array([0.0, -0.1 + 0.02 * i / 30, math.pi / 2]) for i in range(45)]
+    frames = [renderer.render(p, (0.02, 0.0, 0.0)) for p in poses]
+    _publish_frames(probe, pub_img, pub_info, frames, model, 2.0)
+    probe.spin_for(0.3)
+    assert len(est) >= 30          # best effort: a few frames may be lost on the way
+    last = est[-1]
+    k = round((_t(last.header.stamp) - 2.0) * 30)          # the capture stamp of one of the frames
+    assert _t(last.header.stamp) == pytest.approx(2.0 + k / 30, abs=1e-6) and k >= 40
+    assert last.pose.pose.position.y == pytest.approx(poses[k][1], abs=1e-3)
+    assert last.twist.twist.linear.x == pytest.approx(0.02, abs=0.005)
+    assert last.pose.covariance[0] > 0 and last.twist.covariance[0] > 0
+    assert debug and (debug[-1].width, debug[-1].encoding) == (640, "bgr8")
+    # the tag disappears (empty tank): odometry stops after the coast timeout
+    empty = TankRenderer(model, CameraPose.overhead(0.8), RenderSettings(noise_sigma=2.0))
+    blank = empty.render(np.array([5.0, 5.0, 0.0]))          # robot far outside the view
+    n_before = len(est)
+    _publish_frames(probe, pub_img, pub_info, [blank] * 30, model, 2.0 + 45 / 30)
+    probe.spin_for(1.2)
+    late = [m for m in est[n_before:] if _t(m.header.stamp) > 2.0 + 44 / 30 + 0.3 + 1e-3]
+    assert not late, "stale odometry was published after the coast timeout"
+    assert any("lost" in s.message for d in diags[-3:] for s in d.status)
+    assert trk.stop() == 0
+
+
+def test_missing_files_and_devices_exit_2(launch, tmp_path):
+    trk = launch("tracker_node", params={"tank_calibration_file": str(tmp_path / "nope.yaml")})
+    assert trk.wait(60) == 2
+    assert "nope.yaml does not exist" in trk.log_text()
+    cam = launch("camera_node", params={"source": "/dev/video_missing_42"})
+    assert cam.wait(60) == 2
+    assert "/dev/video_missing_42" in cam.log_text() and "no such device" in cam.log_text()
+    junk = tmp_path / "junk.mp4"
+    junk.write_bytes(b"not a video" * 100)
+    cam2 = launch("camera_node", params={"source": str(junk)})
+    assert cam2.wait(60) == 2
+    assert "junk.mp4" in cam2.log_text()
+    rs = launch("camera_node", params={"source": "realsense"})
+    assert rs.wait(60) == 2
+    assert "pyrealsense2" in rs.log_text()
+    # asked to retry: keeps running and says so
+    retry = launch("camera_node", params={"source": "/dev/video_missing_42", "retry": True, "retry_period_s": 0.5})
+    retry.wait_for_log(r"no such device or file; retrying every 0.5 s", timeout=60)
+    retry.wait_for_log(r"(?s)retrying.*retrying", timeout=10)
+    assert retry.running() and retry.stop() == 0
+
+
+def test_camera_node_publishes_a_video_file(launch, probe, tmp_path):
+    path = tmp_path / "clip.avi"
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, (320, 240))
+    for i in range(20):
+        f = np.full((240, 320, 3), 40, np.uint8)
+        cv2.putText(f, str(i), (100, 120), cv2.FONT_HERSHEY_SIMPLEX, 2, (255, 255, 255), 3)
+        w.write(f)
+    w.release()
+    images, infos = [], []
+    probe.node.create_subscription(Image, "/camera/image_raw", images.append, QOS)
+    probe.node.create_subscription(CameraInfo, "/camera/camera_info", infos.append, QOS)
+    cam = launch("camera_node", params={"source": str(path), "loop": True})
+    probe.spin_until(lambda: len(images) >= 25, timeout=60, what="25 frames")
+    m = images[-1]
+    assert (m.width, m.height, m.encoding) == (320, 240, "bgr8")
+    assert (infos[-1].width, infos[-1].height) == (320, 240)
+    stamps = [_t(i.header.stamp) for i in images]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    assert cam.stop() == 0
+
+
+def test_real_camera_chain_on_a_video_file(launch, probe, tmp_path):
+    """camera_node (a video file, its calibration YAML) -> tracker_node (tank calibration
+    YAML) -> odometry of a robot swimming straight at 2 cm/s."""
+    from frog_vision.core.camera_model import CameraModel
+    from frog_vision.core.renderer import RenderSettings, TankRenderer
+    from frog_vision.core.tank_calibration import CameraPose, TankCalibration
+    cam = CameraModel(640, 480, [[610.0, 0, 318.0], [0, 611.0, 242.0], [0, 0, 1]], [-0.1, 0.04, 0, 0, 0])
+    pose = CameraPose.overhead(0.8, tilt_x=np.radians(1.0))
+    cam.to_yaml(tmp_path / "cam.yaml")
+    TankCalibration(pose, 0.0, 0.0, 0, (), (640, 480)).to_yaml(tmp_path / "tank.yaml")
+    r = TankRenderer(cam, pose, RenderSettings(noise_sigma=2.0))
+    path = tmp_path / "swim.avi"
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, (640, 480))
+    truth = [np.array([-0.1 + 0.02 * i / 30, 0.05, 0.0]) for i in range(150)]
+    for p in truth:
+        w.write(r.render(p, (0.02, 0.0, 0.0)))
+    w.release()
+    est = []
+    probe.node.create_subscription(Odometry, "/frog/odom", est.append, QOS)
+    launch("camera_node", params={"source": str(path), "camera_info_file": str(tmp_path / "cam.yaml")})
+    trk = launch("tracker_node", params={"tank_calibration_file": str(tmp_path / "tank.yaml")})
+    probe.spin_until(lambda: len(est) >= 90, timeout=90, what="90 odometry messages")
+    _, p, v = _odom_arrays(est)
+    assert np.all(np.abs(p[:, 1] - 0.05) < 1e-3) and np.all(np.abs(p[:, 2]) < np.radians(0.5))
+    assert np.all((p[:, 0] > -0.101) & (p[:, 0] < -0.1 + 0.02 * 5 + 1e-3))
+    assert np.median(v[30:, 0]) == pytest.approx(0.02, abs=0.004)
+    assert trk.stop() == 0
