@@ -83,7 +83,7 @@ class FrogParameters:
     body_young_equivalent: float = field(default=26.0e6, metadata={'range': (1.0e6, 1.0e11), 'unit': 'Pa'})
     # [m] in-plane frame width (90 - 35) / 2 mm
     body_section_width: float = field(default=0.0275, metadata={'range': (0.002, 0.1), 'unit': 'm'})
-    # [m] D of the body rods in eq. 1, 3 (as the limbs)
+    # [m] D of the body rods in eq. 1, 3 with body_fluid_section='rod' (the earlier model)
     body_rod_diameter: float = field(default=0.004, metadata={'range': (0.001, 0.1), 'unit': 'm'})
     # --- fluid (paper, Hydrodynamic Characterization) ---
     # rho_f
@@ -229,9 +229,9 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
                   '+ PCB, foam, silicone'),
     'body_height': ('m', 'neutral buoyancy (paper: foam cancels battery weight): 150 g / '
                     '1000 kg/m^3 over the frame area 90^2 - 35^2 mm^2 = 22 mm (body EI, EA)'),
-    'body_rod_diameter': ('m', 'paper: "limbs and body are represented by rods with different '
-                          'densities" -> same rod diameter as the limbs (4 mm) in drag eq. 1 and '
-                          'added mass eq. 3; C_bn = 0.8 was calibrated by the authors with it'),
+    'body_rod_diameter': ('m', "D of the body rods in drag eq. 1 and added mass eq. 3 with body_fluid_section="
+                          "'rod' only (the earlier model: the limbs' 4 mm, with which the authors' C_bn = 0.8 "
+                          "was calibrated); the default 'height' section uses H_f/H_a"),
     'body_young_equivalent': ('Pa', 'assumption: "four elastic rods with high stiffness"; gives '
                               'body EI ~ 2.6e4 x limb EI so the body stays square'),
     'body_section_width': ('m', 'frame width (L_o - L_i)/2 = 27.5 mm'),
