@@ -169,6 +169,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--samples", type=int, default=300, help="timed round trips per direction and process")
     ap.add_argument("--rate", type=float, default=10.0, help="primitives (and Q lines) per second")
+    ap.add_argument("--plot", default=str(ROOT / "runs" / "bench" / "bridge_latency.png"),
+                    help="latency distributions as PNG ('' = none)")
     args = ap.parse_args()
     domain = acquire_domain()
     load0 = os.getloadavg()
@@ -194,6 +196,32 @@ def main():
     p99_out, p99_in = percentile(results["bridge_node"][0], 99), percentile(results["bridge_node"][1], 99)
     ok = med_out <= 2 and med_in <= 2 and p99_out <= 5 and p99_in <= 5
     print(f"\ntarget median <= 2 ms and p99 <= 5 ms both ways: {'met' if ok else 'NOT met'}")
+    if args.plot:
+        plot(results, Path(args.plot))
+        print(f"plot: {args.plot}")
+
+
+def plot(results, path: Path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    for ax, idx, title in ((axes[0], 0, "primitive -> first serial byte"), (axes[1], 1, "Q line -> frog/imu")):
+        for kind, (out_lat, in_lat, _cpu, _wall) in results.items():
+            lat = np.sort([out_lat, in_lat][idx])
+            ax.plot(lat, np.arange(1, len(lat) + 1) / len(lat), label=kind)
+        ax.axvline(2.0, color="grey", ls=":", label="median target")
+        ax.axvline(5.0, color="grey", ls="--", label="p99 target")
+        ax.set_xscale("log")
+        ax.set_xlabel("latency [ms]")
+        ax.set_title(title)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("fraction of samples")
+    axes[0].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
 
 
 if __name__ == "__main__":

@@ -1,9 +1,10 @@
 """Rendered test sequences of frog_sim's simulated frog (shared by bench/vision_accuracy.py
 and tests/test_vision_accuracy.py; outside any package core, so it may use both cores).
 
-The simulator executes a primitive every 1.5 s (forward strokes and turning strokes); every
+The simulator executes a primitive every 1.5 s (forward and turning strokes); every
 camera frame (30 fps) is rendered from the simulator's exact state: centre-of-mass pose,
-body twist and rod network, with the tag on the body ring's centre.
+body twist and rod network, with the tag on the body ring's centre (the pose is the ring
+centre's, the twist that point's body-frame velocity).
 """
 from __future__ import annotations
 
@@ -14,9 +15,10 @@ from frog_vision.core.renderer import Occluder
 from frog_vision.core.robot_shape import RobotShape, shape_from_segments
 from frog_vision.core.synthetic import Trajectory
 
-#: a forward stroke (B), three turning strokes one way (C: three limbs), a forward stroke and
-#: three the other way (D, C's mirror image)
-DEFAULT_PRIMITIVES = ("B", "C", "C", "C", "B", "D", "D", "D")
+#: a forward stroke (B: all four limbs), three turning strokes one way (E: the two left limbs),
+#: a forward stroke and three the other way (F: the two right limbs); the turns are the
+#: strongest of the simulated primitives (35 deg of heading over 10 s, up to 8 deg/s)
+DEFAULT_PRIMITIVES = ("B", "E", "E", "E", "B", "F", "F", "F")
 
 
 def simulated_sequence(duration=10.0, fps=30.0, primitives=DEFAULT_PRIMITIVES, period=1.5,
@@ -38,14 +40,19 @@ def simulated_sequence(duration=10.0, fps=30.0, primitives=DEFAULT_PRIMITIVES, p
                 next_primitive += period
             sim.step(1)
         s = sim.rigid_body_state()
-        pose = np.array([s.com[0], s.com[1], s.heading])
         world = shape_from_segments(sim.node_positions[edges.ravel()].reshape(-1, 2, 2))
+        # the tag's pose: the body ring's centre (the COM of eq. 10 includes the limbs' added
+        # mass, a few mm aft of the ring centre with broad limbs)
+        centre = np.asarray(world.ring_centre, dtype=float)
+        pose = np.array([centre[0], centre[1], s.heading])
+        r = centre - s.com
+        v = s.com_velocity + s.yaw_rate * np.array([-r[1], r[0]])
         c, sn = np.cos(pose[2]), np.sin(pose[2])
         rot = np.array([[c, -sn], [sn, c]])
         shapes.append(RobotShape((world.ring - pose[:2]) @ rot, (world.limbs - pose[:2]) @ rot))
         ts.append(sim.time)
         poses.append(pose)
-        twists.append([s.body_velocity[0], s.body_velocity[1], s.yaw_rate])
+        twists.append([c * v[0] + sn * v[1], -sn * v[0] + c * v[1], s.yaw_rate])
     return Trajectory(np.array(ts), np.array(poses), np.array(twists), np.zeros(len(ts))), shapes
 
 

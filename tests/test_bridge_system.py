@@ -161,7 +161,7 @@ def test_emergency_latches_until_cleared_and_protection_refuses(launch, probe, t
     diag = Diag(probe)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     probe.wait_for_subscriber("/frog/primitive")
-    probe.spin_for(0.3)
+    probe.spin_for(1.0)                 # both ends of the DDS link matched before the first sample
 
     # limb protection: H (FR) twice 0.3 s apart -> the second is refused and counted
     publish_primitive(probe, pub, "H")
@@ -354,6 +354,8 @@ def _readable(fd, timeout=0.0):
 def test_bad_configuration_exits_2(launch, tmp_path):
     b = launch("bridge_node", params={"reconnect_period_s": 2.0, "reconnect_max_period_s": 1.0})
     assert b.wait(60) == 2 and "reconnect_max_period_s" in b.log_text()
+    b = launch("bridge_node", params={"port": ""})
+    assert b.wait(60) == 2 and "port is empty" in b.log_text()
     b = launch("bridge_node", params={"quaternion_order": "zyxw"})
     assert b.wait(60) == 2 and "quaternion_order" in b.log_text()
     (tmp_path / "plain").write_text("x")
@@ -412,7 +414,7 @@ def test_shutdown_between_front_and_rear_sends_no_rear(launch, probe, tmp_path):
                                   emulator_params={"imu_rate_hz": 0.0})
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     probe.wait_for_subscriber("/frog/primitive")
-    probe.spin_for(0.2)
+    probe.spin_for(1.0)
     publish_primitive(probe, pub, "B")
     end = time.monotonic() + 3
     while not h_lines(read_log(log)) and time.monotonic() < end:
@@ -484,3 +486,27 @@ def test_cli_sends_primitives_and_limb_commands(launch, probe, tmp_path):
     cli = launch("frog-bridge", "clear-emergency")
     assert cli.wait(30) == 0 and "no emergency was latched" in cli.log_text()
     assert emu.stop() == 0 and bridge.stop() == 0
+
+
+def test_emulator_survives_garbage_from_the_host_side(launch, probe, tmp_path):
+    """The emulated firmware logs bad lines (binary, over-long, bad ids) and keeps firing good ones."""
+    import tty
+    from soft_robot_interfaces.msg import LimbActivation
+    link, log = tmp_path / "tty", tmp_path / "lines.csv"
+    emu = launch("robot_emulator", params={"link_path": str(link), "command_log": str(log), "imu_rate_hz": 0.0})
+    emu.wait_for_log("emulated relay on", timeout=30)
+    fired = []
+    probe.node.create_subscription(LimbActivation, "/frog/limb_activation", fired.append, QOS)
+    probe.wait_for_topic("/frog/limb_activation")
+    probe.spin_for(1.0)                 # the emulator's writer must have matched our reader too
+    fd = os.open(link, os.O_RDWR | os.O_NOCTTY)
+    try:
+        tty.setraw(fd)
+        os.write(fd, b"\xff\xfe\x00garbage\n" + b"h " + b"1" * 5000 + b"\nh 9\np 0\nhello\nh 2\r\n")
+        probe.spin_until(lambda: fired, 5, "the good line to fire")
+    finally:
+        os.close(fd)
+    assert [list(m.limbs) for m in fired] == [[2]] and fired[0].pulse_duration == pytest.approx(0.08)
+    results = [r for _, _, r in read_log(log)]
+    assert sum(r.startswith("error") for r in results) == 5, results
+    assert emu.running() and emu.stop() == 0

@@ -49,7 +49,29 @@ def test_twin_closes_the_real_chain(small_library, tmp_path):
     assert lat["n"] >= 5 and 0.0 < lat["median_s"] < 0.3, lat
     # the frog moved toward the goal along the path (truth)
     assert m["final_progress"] > 0.3 and m["mean_distance_m"] < 0.03, m
+    # tf for viewers: the tracked and the true pose
+    assert m["tf_frames"].get("tank -> frog", 0) > 100 and m["tf_frames"].get("tank -> frog_true", 0) > 100, m
     # outputs people look at, and a recording that decodes
     assert (out / "line.png").stat().st_size > 20_000 and (out / "line.mp4").stat().st_size > 10_000
     check = subprocess.run(["frog-log", "check", *m["recording"]], capture_output=True, text=True, timeout=300)
     assert check.returncode == 0, check.stdout + check.stderr
+    # the Foxglove layout in the repository shows topics this recording has
+    from mcap.reader import make_reader
+    recorded = set()
+    for f in m["recording"]:
+        with open(f, "rb") as fh:
+            recorded |= {c.topic for c in make_reader(fh).get_summary().channels.values()}
+    assert _layout_topics() <= recorded, _layout_topics() - recorded
+
+
+def _layout_topics() -> set:
+    layout = json.loads((ROOT / "docs" / "foxglove_twin_layout.json").read_text())
+    topics = set()
+    for cfg in layout["configById"].values():
+        topics |= set(cfg.get("topics", {}))
+        if cfg.get("imageMode", {}).get("imageTopic"):
+            topics.add(cfg["imageMode"]["imageTopic"])
+        topics |= {p["value"].split(".")[0] for p in cfg.get("paths", [])}
+        if cfg.get("topicPath"):
+            topics.add(cfg["topicPath"])
+    return topics

@@ -8,6 +8,7 @@ params      print the parameter table with sources
 fit         print the eq. 9 fit of every measured curvature profile (RMS errors)
 validate    simulated vs measured steady speed, 10 % EGaIn, phase 0.5 (RMS error)
 convergence time-step and edge-length convergence of the 10-cycle displacement
+fidelity    the simulator vs the real robot: transitions, kick response, coasting, speeds
 """
 from __future__ import annotations
 
@@ -29,6 +30,8 @@ EXAMPLES = """examples:
   FROG_DATA_DIR=../shared/data/frog frog-sim fit --write-package-data
   frog-sim validate --out runs/validation
   frog-sim convergence --out runs/convergence
+  frog-sim fidelity --out runs/fidelity                 # table, PNGs, fidelity.json
+  frog-sim fidelity --no-speeds --set body_drag_normal=1.2 --set limb_root_angle_deg=-60
 """
 
 
@@ -102,6 +105,18 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument('--out', type=Path, default=None)
     c = sub.add_parser('convergence', help='dt and dl convergence of the 10-cycle displacement')
     c.add_argument('--out', type=Path, default=None)
+    fi = sub.add_parser('fidelity', help='simulator vs real robot (hardware runs, speeds): table, PNGs, JSON',
+                        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    fi.add_argument('--out', type=Path, default=None, help='output folder (default runs/frog_sim/fidelity_<time>)')
+    fi.add_argument('--no-speeds', action='store_true', help='skip the speed comparisons (~1 min)')
+    fi.add_argument('--latency', type=float, default=None,
+                    help='decision -> firing delay of the simulated primitives [s] (default 0.10)')
+    fi.add_argument('--tag-offset-deg', type=float, default=None,
+                    help='robot heading = tag theta + offset (default: estimated from B on the line runs)')
+    fi.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
+                    help='override a model parameter (repeatable), e.g. body_drag_normal=1.2')
+    fi.add_argument('--dt', type=_positive('--dt'), default=None)
+    fi.add_argument('--quiet', action='store_true', help='no progress bar')
     return parser
 
 
@@ -297,6 +312,61 @@ def cmd_convergence(args):
     print(f'wrote {out / "convergence.json"}')
 
 
+def parse_overrides(items) -> dict:
+    """``['name=value', ...]`` -> ``{name: value}`` for :class:`FrogParameters` (typed by its defaults)."""
+    from .core.model_parameters import FrogParameters
+    defaults = FrogParameters().as_dict()
+    out = {}
+    for item in items:
+        name, sep, text = item.partition('=')
+        name = name.strip()
+        if not sep:
+            raise CliError(f'--set {item!r}: expected NAME=VALUE')
+        if name not in defaults:
+            import difflib
+            close = difflib.get_close_matches(name, list(defaults), n=1)
+            raise CliError(f'--set {name}: not a model parameter' + (f' (did you mean {close[0]}?)' if close else ''))
+        kind = type(defaults[name])
+        try:
+            out[name] = kind(text) if kind is not int else int(float(text))
+        except ValueError:
+            raise CliError(f'--set {item!r}: {name} needs a {kind.__name__}') from None
+    return out
+
+
+def cmd_fidelity(args):
+    from .core.model_parameters import FrogParameters
+    from .core.simulation import DEFAULT_TIME_STEP
+    from .fidelity import FidelityConfig, fidelity_report, format_table, plot_report
+    try:
+        params = FrogParameters().replace(**parse_overrides(args.set))
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    config = FidelityConfig(time_step=args.dt or DEFAULT_TIME_STEP, speeds=not args.no_speeds,
+                            tag_offset_deg=args.tag_offset_deg)
+    if args.latency is not None:
+        if not 0.0 <= args.latency < 1.0:
+            raise CliError(f'--latency {args.latency} must be in [0, 1) s')
+        config.latency = args.latency
+    out = _out_dir(args, 'fidelity')
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+        bar = tqdm(desc='fidelity simulations', unit='sim')
+    t0, c0 = time.perf_counter(), time.process_time()
+    rep = fidelity_report(params, config, progress=(bar.update if bar is not None else None))
+    if bar is not None:
+        bar.close()
+    table = format_table(rep)
+    print(table)
+    (out / 'fidelity.txt').write_text(table + '\n')
+    (out / 'fidelity.json').write_text(rep.to_json())
+    files = plot_report(rep, out)
+    print(f'{time.perf_counter() - t0:.0f} s wall, {time.process_time() - c0:.0f} s CPU')
+    for f in [out / 'fidelity.txt', out / 'fidelity.json', *files]:
+        print(f'wrote {f}')
+
+
 def main(argv=None) -> int:
     """Entry point of ``frog-sim``; returns the exit status."""
     parser = build_parser()
@@ -305,7 +375,7 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     handlers = {'gait': cmd_gait, 'primitives': cmd_primitives, 'params': cmd_params, 'fit': cmd_fit,
-                'validate': cmd_validate, 'convergence': cmd_convergence}
+                'validate': cmd_validate, 'convergence': cmd_convergence, 'fidelity': cmd_fidelity}
     try:
         handlers[args.command](args)
     except CliError as exc:

@@ -12,8 +12,10 @@ from pathlib import Path
 import numpy as np
 
 EPILOG = """examples:
-  frog-sweep calibrate --out runs/calibration                 # C_bn in 0.8..2.0 vs calibration runs
-  frog-sweep calibrate --out runs/cal --candidates 0.6 0.8 1.0 --workers 2
+  frog-sweep calibrate --out runs/calibration                 # joint: hardware transitions + all speeds
+  frog-sweep calibrate --out runs/cal_quick --refine-iterations 10
+  frog-sweep calibrate --body-drag-only --out runs/cbn        # the paper's C_bn in 0.8..2.0 only
+  frog-sweep calibrate --body-drag-only --out runs/cal --candidates 0.6 0.8 1.0 --workers 2
   frog-sweep sweep --out runs/sweep                           # every EGaIn x frequency x phase
   frog-sweep sweep --out runs/sweep --scheduler tcp://host:8786
   frog-sweep sweep --out runs/sweep_quick --phases 0.3 0.5 0.7 --cycles 6
@@ -74,6 +76,126 @@ def cmd_calibrate(args) -> int:
     fig.tight_layout()
     fig.savefig(out / "calibration.png", dpi=120)
     print(f"\nwrote {out / 'calibration.json'} and {out / 'calibration.png'}")
+    return 0
+
+
+def cmd_calibrate_any(args) -> int:
+    return cmd_calibrate(args) if args.body_drag_only else cmd_calibrate_joint(args)
+
+
+def _fmt_values(values: dict) -> str:
+    return ", ".join(f"{k} = {v}" if isinstance(v, str) else f"{k} = {v:.4g}" for k, v in values.items())
+
+
+def cmd_calibrate_joint(args) -> int:
+    """Joint calibration (issue 11): grid on the kick geometry, Nelder-Mead with the speeds."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from tqdm import tqdm
+
+    from frog_sim import calibration as cal
+    from frog_sim.core.actuation import ActuationLibrary, find_data_file
+    from frog_sim.core.hardware_runs import HARDWARE_RUNS, estimate_tag_offset, read_hardware_runs
+    from frog_sim.core.model_parameters import FrogParameters
+    from frog_sim.fidelity import read_experiment_speeds
+    from frog_sim.studies import measured_speeds
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0, c0 = time.perf_counter(), time.process_time()
+    folder = find_data_file("hardware_runs/line1.csv").parent
+    logs = read_hardware_runs(folder, HARDWARE_RUNS)
+    offset, offset_sd, n_off = estimate_tag_offset([logs["line1"], logs["line2"]])
+    offset_deg = float(np.degrees(offset))
+    train, targets, _ = cal.read_targets(folder, cal.TRAIN_RUNS, offset_deg)
+    test, test_targets, _ = cal.read_targets(folder, cal.TEST_RUNS, offset_deg)
+    cal_speeds = [(f, float(np.nanmean(list(v.values())))) for f, v in sorted(measured_speeds().items())]
+    exp_speeds = [(e, f, v) for e, f, _, v in read_experiment_speeds()]
+    lib = ActuationLibrary.load()
+    base = FrogParameters().replace(**cal.PHYSICAL_BASE)
+    common = dict(latency=args.latency, library=lib, cache_file=out / "evaluations.jsonl")
+    quick = cal.JointObjective(targets, cal_speeds, exp_speeds, base, speeds=False, **common)
+    full = cal.JointObjective(targets, cal_speeds, exp_speeds, base, speed_cycles=args.speed_cycles, **common)
+    n_grid = int(np.prod([len(v) for v in cal.DEFAULT_GRID.values()]))
+    bar = tqdm(total=n_grid + args.refine_iterations, desc="calibration", unit="eval")
+
+    def progress(stage, ev):
+        bar.update(1)
+        bar.set_postfix_str(f"{stage} cost {ev.cost:.2f}")
+    best, history = cal.coarse_to_fine(quick, cal.DEFAULT_GRID, full, cal.DEFAULT_REFINE_START,
+                                       args.refine_iterations, progress)
+    bar.close()
+    grid_best = min((ev for st, ev in history if st == "grid"), key=lambda e: e.cost)
+    # final numbers with the standard 8-cycle speeds; today's model for comparison
+    final = cal.JointObjective(targets, cal_speeds, exp_speeds, base, speed_cycles=8, **common)
+    ev_best = final(best.values)
+    legacy_base = FrogParameters().replace(**cal.LEGACY_MODEL)
+    legacy = cal.JointObjective(targets, cal_speeds, exp_speeds, legacy_base, speed_cycles=8, **common)
+    legacy_vals = {k: getattr(legacy_base, k) for k in best.values}
+    ev_legacy = legacy(legacy_vals)
+    # cross-validation: held-out sines, transition terms only
+    held = cal.JointObjective(test_targets, cal_speeds, exp_speeds, base, speeds=False, **common)
+    held_legacy = cal.JointObjective(test_targets, cal_speeds, exp_speeds, legacy_base, speeds=False, **common)
+    ev_held, ev_held_legacy = held(best.values), held_legacy(legacy_vals)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    print(f"tag offset from B on the line runs: {offset_deg:.1f} deg (sd {np.degrees(offset_sd):.1f}, n {n_off})")
+    print(f"grid best (transitions + yaw only): {_fmt_values(grid_best.values)}; cost {grid_best.cost:.2f}")
+    print(f"calibrated: {_fmt_values(ev_best.values)}")
+    rows = sorted(k for k in ev_best.terms if not k.startswith("_"))
+    print(f"\n{'term (1 = at tolerance)':28s} {'before':>8s} {'calibrated':>11s} {'held-out before':>15s} "
+          f"{'held-out cal.':>14s}")
+    for k in rows:
+        print(f"{k:28s} {ev_legacy.terms.get(k, np.nan):8.2f} {ev_best.terms[k]:11.2f} "
+              f"{ev_held_legacy.terms.get(k, np.nan):15.2f} {ev_held.terms.get(k, np.nan):14.2f}")
+    print(f"{'total':28s} {ev_legacy.cost:8.2f} {ev_best.cost:11.2f} {ev_held_legacy.cost:15.2f} {ev_held.cost:14.2f}")
+    print(f"speed RMS [mm/s]: calibration runs {1e3 * ev_legacy.terms['_rms_calibration_m_s']:.1f} -> "
+          f"{1e3 * ev_best.terms['_rms_calibration_m_s']:.1f}, all experiments "
+          f"{1e3 * ev_legacy.terms['_rms_experiments_m_s']:.1f} -> {1e3 * ev_best.terms['_rms_experiments_m_s']:.1f}")
+    deg = np.degrees(1.0)
+    print(f"\n{'prim':>4} {'n':>3} {'dh real':>8} {'before':>7} {'cal.':>7} | {'dy real':>8} {'before':>7} "
+          f"{'cal.':>7} | {'dx real':>8} {'before':>7} {'cal.':>7}   (fit runs; deg, mm)")
+    for p, t in targets.items():
+        a, b = ev_legacy.sim["transitions"][p], ev_best.sim["transitions"][p]
+        print(f"{p:>4} {t.n:3d} {deg * t.dheading:8.1f} {deg * a['dheading']:7.1f} {deg * b['dheading']:7.1f} | "
+              f"{1e3 * t.dy:8.1f} {1e3 * a['dy']:7.1f} {1e3 * b['dy']:7.1f} | {1e3 * t.dx:8.1f} "
+              f"{1e3 * a['dx']:7.1f} {1e3 * b['dx']:7.1f}")
+    print(f"\n{len(history)} evaluations, {wall:.0f} s wall, {cpu:.0f} s CPU")
+    result = {"tag_offset_deg": offset_deg, "base": cal.PHYSICAL_BASE, "calibrated": ev_best.values,
+              "grid_best": grid_best.values, "terms": ev_best.terms, "cost": ev_best.cost,
+              "before": {"values": legacy_vals, "terms": ev_legacy.terms, "cost": ev_legacy.cost},
+              "cross_validation": {"fit_runs": list(cal.TRAIN_RUNS), "held_out_runs": list(cal.TEST_RUNS),
+                                   "held_out_terms": ev_held.terms, "held_out_cost": ev_held.cost,
+                                   "held_out_before_terms": ev_held_legacy.terms},
+              "targets": {p: vars(t) for p, t in targets.items()},
+              "held_out_targets": {p: vars(t) for p, t in test_targets.items()},
+              "simulated": ev_best.sim, "history": [{"stage": st, "values": ev.values, "cost": ev.cost}
+                                                    for st, ev in history],
+              "wall_time_s": wall, "cpu_time_s": cpu}
+    (out / "calibration.json").write_text(json.dumps(_meta(args, {"result": result}), indent=1, default=float))
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    grid_evs = [ev for st, ev in history if st == "grid" and np.isfinite(ev.cost)]
+    for i, name in enumerate(cal.DEFAULT_GRID):
+        vals = sorted({ev.values[name] for ev in grid_evs})
+        lo = [min(ev.cost for ev in grid_evs if ev.values[name] == v) for v in vals]
+        x = np.linspace(0.0, 1.0, len(vals))
+        axes[0].plot(x, lo, "-o", label=f"{name} {vals[0]}..{vals[-1]}")
+    axes[0].set_xlabel("parameter, scaled to its grid (0 = lowest value)")
+    axes[0].set_ylabel("lowest grid cost (transitions + yaw)")
+    axes[0].legend(fontsize=7)
+    axes[0].set_title("stage 1: grid")
+    keys = rows
+    xk = np.arange(len(keys))
+    for j, (lab, ev) in enumerate((("before (fit runs)", ev_legacy), ("calibrated (fit runs)", ev_best),
+                                   ("calibrated (held-out sines)", ev_held))):
+        axes[1].bar(xk + 0.27 * (j - 1), [ev.terms.get(k, np.nan) for k in keys], 0.27, label=lab)
+    axes[1].axhline(1.0, color="k", lw=0.8, ls="--")
+    axes[1].set_yscale("log")
+    axes[1].set_xticks(xk, keys, rotation=60, ha="right", fontsize=7)
+    axes[1].set_ylabel("(error / tolerance)^2")
+    axes[1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "calibration.png", dpi=120)
+    print(f"wrote {out / 'calibration.json'} and {out / 'calibration.png'}")
     return 0
 
 
@@ -180,11 +302,21 @@ def build_parser():
         p.add_argument("--workers", type=int, help="local processes (default: all cores)")
         p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786")
 
-    c = sub.add_parser("calibrate", help="fit C_bn to the 10 %% EGaIn calibration runs")
+    c = sub.add_parser("calibrate", help="joint calibration vs hardware transitions and speeds "
+                                         "(--body-drag-only: C_bn vs the 10 %% runs, as the paper)",
+                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     common(c)
+    c.add_argument("--body-drag-only", action="store_true",
+                   help="the paper's calibration: grid of C_bn vs the 10 %% EGaIn calibration runs")
     c.add_argument("--candidates", type=float, nargs="+",
-                   default=[round(x, 2) for x in np.arange(0.8, 2.0001, 0.1)])
-    c.set_defaults(func=cmd_calibrate)
+                   default=[round(x, 2) for x in np.arange(0.8, 2.0001, 0.1)],
+                   help="C_bn values of --body-drag-only")
+    c.add_argument("--refine-iterations", type=int, default=30,
+                   help="Nelder-Mead evaluations of the full objective after the grid (default 30)")
+    c.add_argument("--speed-cycles", type=int, default=6,
+                   help="gait cycles per speed simulation during the search (default 6)")
+    c.add_argument("--latency", type=float, default=0.10, help="decision -> firing [s] (default 0.10)")
+    c.set_defaults(func=cmd_calibrate_any)
     s = sub.add_parser("sweep", help="speed and COT over EGaIn x frequency x phase")
     common(s)
     s.add_argument("--phases", type=float, nargs="+", default=None, help="default 0.0..0.9")

@@ -54,11 +54,18 @@ def test_actuation_fit_reproduces_measured_profiles(library, measured_file):
 
 
 def test_actuation_profile_lookup_errors_name_the_value(library):
-    with pytest.raises(ValueError, match='EGaIn 15'):
-        library.profile(15, 1.0)
-    with pytest.raises(ValueError, match='2.5 Hz'):
+    """Inside the measured hull a design is interpolated (issue 11); outside it is refused."""
+    p15 = library.profile(15, 1.0)
+    assert {(e, f) for e, f, _ in p15.interpolated_from} <= {(10.0, 1.0), (20.0, 1.0), (10.0, 0.9), (20.0, 1.1),
+                                                              (10.0, 1.1), (20.0, 0.9)}
+    with pytest.raises(ValueError, match=r"EGaIn 10 % at 2.5 Hz is outside the measured designs .*0.4-1.2 Hz"):
         library.profile(10, 2.5)
-    assert library.profile(10, 1.0).frequency_hz == 1.0
+    with pytest.raises(ValueError, match="outside the measured designs"):
+        library.profile(60, 2.0)
+    with pytest.raises(ValueError, match="EGaIn 15 % has no measured profile"):
+        library.profile(15, 1.0, interpolate=False)
+    with pytest.raises(ValueError, match="1.65 Hz was not measured"):
+        library.profile(40, 1.65, interpolate=False)
 
 
 def test_primitive_schedules():
@@ -192,3 +199,34 @@ def test_every_parameter_has_a_range_or_choices_and_a_unit():
     assert parameter_range("body_mass") == (0.02, 1.0) and parameter_unit("body_mass") == "kg"
     with pytest.raises(KeyError, match="did you mean 'body_mass'"):
         parameter_range("body_mas")
+
+
+def test_interpolated_profiles_by_hand_and_leave_one_out(library, measured_file):
+    """Deliver 5: linear (barycentric) interpolation of the eq. 9 coefficients."""
+    # on a measured EGaIn line, half-way between two frequencies: the mean coefficients
+    a, b = library.profiles[(40.0, 1.6)], library.profiles[(40.0, 1.7)]
+    mid = library.profile(40, 1.65)
+    assert mid.coefficients == pytest.approx(tuple(0.5 * (np.array(a.coefficients) + b.coefficients)))
+    assert mid.switch_time == pytest.approx(0.5 * (a.switch_time + b.switch_time))
+    assert mid.cycle_time == pytest.approx(1 / 1.65)
+    # at a measured design the interpolation returns that design
+    same = library.interpolated_profile(30, 1.2)
+    assert same.coefficients == pytest.approx(library.profiles[(30.0, 1.2)].coefficients, abs=1e-9)
+    # the built but unmeasured designs of experiment_speeds.csv can now be simulated
+    for f in (1.5, 1.6, 1.7):
+        assert library.profile(30, f).interpolated_from
+    # leave-one-out against the measured curves: interior points of a measured EGaIn line
+    from frog_sim.core.actuation import ActuationLibrary
+    data = read_curvature_profiles(measured_file("limb_curvature_profiles.csv"))
+    errors = []
+    for (e, f), prof in library.profiles.items():
+        freqs = library.frequencies(e)
+        if f in (freqs[0], freqs[-1]):
+            continue
+        sub = ActuationLibrary({k: v for k, v in library.profiles.items() if k != (e, f)}, {})
+        est = sub.interpolated_profile(e, f)
+        t, kappa = data[(e, f)]
+        rel = np.sqrt(np.mean((est.curvature(t) - kappa) ** 2)) / np.ptp(kappa)
+        errors.append(rel)
+        assert rel < 0.25, (e, f, rel)       # across EGaIn (a neighbour left out) up to ~21 %
+    assert np.median(errors) < 0.03           # typically ~2.4 % of the stroke

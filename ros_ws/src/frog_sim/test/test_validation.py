@@ -9,7 +9,8 @@ from frog_sim.studies import displacement_after_cycles, measured_speeds, speed_v
 
 def test_steady_speed_matches_calibration_runs(measured_file):
     """10 % EGaIn, phase 0.5, 0.4-1.1 Hz vs the measured runs (paper: good agreement).
-    Measured speeds rise from ~22 to ~56 mm/s; the model must follow within 8 mm/s RMS and
+    Measured speeds rise from ~22 to ~56 mm/s; the model must follow within 5 mm/s RMS (the
+    issue-11 target; the jointly calibrated model: ~3.6 mm/s here, 4.9 with 1.2 Hz) and
     rise with frequency like the measurements."""
     measured_file("calibration_runs_10pct.csv")
     rows, rms = speed_validation()
@@ -19,7 +20,7 @@ def test_steady_speed_matches_calibration_runs(measured_file):
     for r in rows:
         print(f"  {r.frequency_hz:.1f}   {1e3 * r.measured:8.1f}   {1e3 * r.simulated:8.1f}")
     print(f"RMS error {1e3 * rms:.1f} mm/s")
-    assert rms < 0.008
+    assert rms < 0.005
     assert np.corrcoef(sim, meas)[0, 1] > 0.9
     assert np.all(np.abs(sim - meas) < 0.012)
 

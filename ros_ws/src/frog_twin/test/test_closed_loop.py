@@ -89,7 +89,9 @@ def test_follows_a_right_hand_arc(library):
     swept = np.arctan2(rel[:, 0], rel[:, 1])                      # 0 at the start, clockwise > 0
     assert swept.max() >= 0.95 * ARC_ANGLE, f"got only {swept.max() / ARC_ANGLE:.0%} along the arc"
     assert d.mean() <= 0.035 and d.max() <= 0.09, (d.mean(), d.max())
-    assert res.metrics["primitives_used"].get("E", 0) > res.metrics["primitives_used"].get("F", 0)
+    used = res.metrics["primitives_used"]
+    right, left = sum(used.get(p, 0) for p in "CEG"), sum(used.get(p, 0) for p in "DFH")
+    assert right > left, used       # right-turning primitives (C, E, G) carry a right-hand arc
 
 
 def test_simulator_transitions_predict_the_next_pose_exactly(library):
@@ -112,8 +114,8 @@ def test_simulator_transitions_predict_the_next_pose_exactly(library):
 
 def test_turning_response_mirrors_and_matches_its_own_track():
     """Mirrored primitives (E right, F left) settle into mirrored circles; the fitted steady
-    radius agrees with speed / yaw rate of a steady circle; the yaw rate takes periods to
-    build up. Path radii are checked against their closed forms."""
+    radius agrees with speed / yaw rate of a steady circle; the yaw rate builds up within a
+    few periods. Path radii are checked against their closed forms."""
     from frog_planner.core.paths import ellipse_path, sinusoid_path
     from frog_twin.core.evaluation import path_min_radius, turning_response
 
@@ -122,7 +124,9 @@ def test_turning_response_mirrors_and_matches_its_own_track():
     assert e.steady_radius == pytest.approx(f.steady_radius, rel=1e-4)
     assert e.steady_yaw_rate == pytest.approx(-f.steady_yaw_rate, rel=1e-4) and e.steady_yaw_rate < 0
     assert e.steady_radius == pytest.approx(e.steady_speed / abs(e.steady_yaw_rate), rel=0.15)
-    assert e.rise_time > 2 * PERIOD
+    # issue 11: the real robot reaches 63 % of its steady E/F yaw rate within ~2.3 s; the
+    # earlier simulator took ~12 s (several periods), today's within the first periods
+    assert 0 < e.rise_time < 3 * PERIOD
     assert path_min_radius(line_path()) == math.inf
     # circle of radius l/2 (A = 1); sinusoid y = (l/A) sin(f x / l): min radius l A / f^2 at the
     # peaks, which the 100-point resampling (paper) rounds off by a few per cent

@@ -12,15 +12,25 @@ import sys
 
 import rclpy
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from .clock_watch import SimClockWatch
 from .parameters import ConfigurationError, undeclared_overrides
 
 
-def _raise_keyboard_interrupt(signum, frame):
-    raise KeyboardInterrupt(f"signal {signum}")
+class _StopRequest:
+    """Set by SIGINT/SIGTERM; the spin loop checks it between executor wake-ups.
+
+    A handler that raised (KeyboardInterrupt) could interrupt rclpy inside a C++ call (a
+    message being converted) and surface as an unrelated RuntimeError; a flag cannot.
+    """
+
+    def __init__(self):
+        self.signal = None
+
+    def __call__(self, signum, frame):
+        self.signal = signum
 
 
 def run_node(node_class, args=None, close=None, executor=None) -> int:
@@ -33,10 +43,12 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
     (optional) makes the executor to spin with after ``rclpy.init`` (a class or factory,
     e.g. ``MultiThreadedExecutor`` for a node that serves requests while a long solve runs).
     """
-    signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    stop = _StopRequest()
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
+    spinner = None
     try:
         node = node_class()
         for name, hint in undeclared_overrides(node):
@@ -44,7 +56,11 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
                                    + (f" (did you mean '{hint}'?)" if hint else ""))
         if SimClockWatch.wanted(node):
             node._sim_clock_watch = SimClockWatch(node)
-        rclpy.spin(node, executor=executor() if executor is not None else None)
+        spinner = executor() if executor is not None else SingleThreadedExecutor()
+        spinner.add_node(node)
+        # wake-ups at least every 0.1 s, so a stop request is seen even in a node without timers
+        while stop.signal is None and rclpy.ok():
+            spinner.spin_once(timeout_sec=0.1)
     except (ConfigurationError, ParameterException) as exc:
         name = getattr(node_class, "NODE_NAME", node_class.__name__)
         print(f"[{name}] fatal configuration error: {exc}", file=sys.stderr)
@@ -52,6 +68,8 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        if spinner is not None:
+            spinner.shutdown(timeout_sec=5.0)
         if node is not None:
             if close is not None:
                 close(node)

@@ -14,6 +14,7 @@ package README section "Serial bridge (frog_bridge)" and in :data:`DEFAULTS`.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -67,10 +68,6 @@ class PlannedPulse:
     duration: float
 
 
-def _overlap(a0: float, a1: float, b0: float, b1: float) -> float:
-    return max(0.0, min(a1, b1) - max(a0, b0))
-
-
 class LimbGuard:
     """Remembers the pulses written per limb and refuses pulses that break the limits."""
 
@@ -96,23 +93,25 @@ class LimbGuard:
         history.
         """
         cfg = self.config
+        interval, window = cfg.min_limb_interval_s, cfg.duty_window_s
         placed: list[PlannedPulse] = list(others)
         for p in pulses:
+            end = p.start + p.duration
+            w0 = end - window
             for limb in p.limbs:
-                seen = [(s, d) for s, d in self._history[limb]]
-                seen += [(q.start, q.duration) for q in placed if limb in q.limbs]
-                for s, _d in seen:
+                extra = [(q.start, q.duration) for q in placed if limb in q.limbs]
+                heated = p.duration
+                for s, d in itertools.chain(self._history[limb], extra):    # one pass: both limits
                     gap = abs(p.start - s)
-                    if gap + _EPS < cfg.min_limb_interval_s:
+                    if gap + _EPS < interval:
                         return (f"limb {LIMB_NAMES[limb]} was heated {gap:.3f} s before "
-                                f"(min_limb_interval_s {cfg.min_limb_interval_s:g} s)")
-                end = p.start + p.duration
-                w0 = end - cfg.duty_window_s
-                heated = p.duration + sum(_overlap(s, s + d, w0, end) for s, d in seen)
-                duty = heated / cfg.duty_window_s
+                                f"(min_limb_interval_s {interval:g} s)")
+                    if s + d > w0 and s < end:
+                        heated += min(end, s + d) - max(w0, s)
+                duty = heated / window
                 if duty > cfg.max_duty_cycle + _EPS:
                     return (f"limb {LIMB_NAMES[limb]} would be heated {duty * 100:.1f} % of the last "
-                            f"{cfg.duty_window_s:g} s (max_duty_cycle {cfg.max_duty_cycle * 100:g} %)")
+                            f"{window:g} s (max_duty_cycle {cfg.max_duty_cycle * 100:g} %)")
             placed.append(p)
         return None
 

@@ -12,6 +12,7 @@ state machine are in :mod:`frog_bridge.core`.
 
 from __future__ import annotations
 
+import gc
 import statistics
 import sys
 import time
@@ -70,6 +71,8 @@ PARAMS = [
 
 
 def _validate(p: dict) -> str | None:
+    if not p["port"].strip():
+        return "port is empty: give the relay's serial device (e.g. /dev/ttyACM0)"
     if p["reconnect_max_period_s"] < p["reconnect_period_s"]:
         return (f"reconnect_max_period_s {p['reconnect_max_period_s']} must be >= reconnect_period_s "
                 f"{p['reconnect_period_s']}")
@@ -124,9 +127,12 @@ class BridgeNode(Node):
         self.link = SerialLink(p["port"], p["baud"], self.supervisor, self._wake.trigger, p["write_timeout_s"])
         # Device supervision (settle, stall) runs on a steady clock: the device runs in real time
         # even when the graph runs on simulated time. Commands and stamps use the node clock.
-        self.create_timer(0.05, self.supervise, clock=self._steady)
+        self.create_timer(0.1, self.supervise, clock=self._steady)
         self.create_timer(p["diagnostics_period_s"], self.publish_diagnostics, clock=self._steady)
         self.link.start()
+        # Objects made so far live as long as the node: keep them out of the collector's full
+        # passes, which otherwise add milliseconds to a write now and then.
+        gc.freeze()
         self.get_logger().info(
             f"bridge to {p['port']} at {p['baud']} baud: pulse {p['pulse_ms']} ms, limb protection "
             f"{p['min_limb_interval_s']:g} s / {p['max_duty_cycle'] * 100:g} % of {p['duty_window_s']:g} s, "

@@ -171,7 +171,7 @@ class RobotEmulator(Node):
                 continue
             self.counts["lines"] += 1
             if isinstance(item, DecodeError):
-                self._record(t, "", f"error: {item}")
+                self._record(t, b"", f"error: {item}")
                 continue
             result = self.firmware.handle(item)
             if isinstance(result, DecodeError):

@@ -176,6 +176,8 @@ class CurvatureProfile:
     switch_time: float
     cycle_time: float
     rms_error: float
+    #: ((egain, frequency, weight), ...) of the measured profiles an interpolated one is made of
+    interpolated_from: tuple = ()
 
     def curvature(self, time_since_fire) -> np.ndarray:
         """Curvature [1/m] at ``time_since_fire`` [s] (array-like; negative = never fired)."""
@@ -379,24 +381,74 @@ class ActuationLibrary:
         return sorted(f for e, f in self.profiles if e == round(float(egain_vol_pct), 1))
 
     def profile(self, egain_vol_pct: float, frequency_hz: float,
-                tolerance_hz: float = 0.051) -> CurvatureProfile:
-        """Profile measured nearest to ``frequency_hz`` (within ``tolerance_hz``).
+                tolerance_hz: float = 0.005, interpolate: bool = True) -> CurvatureProfile:
+        """Profile measured at ``frequency_hz`` (within ``tolerance_hz``), else interpolated.
+
+        A design that was not measured (an EGaIn fraction or a frequency between measured
+        ones) gets the eq. 9 coefficients interpolated by :meth:`interpolated_profile`.
 
         Raises
         ------
         ValueError
-            If the EGaIn fraction was not measured or no frequency is close enough.
+            If the design lies outside the hull of the measured designs (or, with
+            ``interpolate=False``, was not measured); the message names the measured range.
         """
         egains = sorted({e for e, _ in self.profiles})
         e = round(float(egain_vol_pct), 1)
-        if e not in egains:
+        if e in egains:
+            freqs = self.frequencies(e)
+            f = min(freqs, key=lambda q: abs(q - frequency_hz))
+            if abs(f - frequency_hz) <= tolerance_hz:
+                return self.profiles[(e, f)]
+            if not interpolate:
+                raise ValueError(f'frequency {frequency_hz} Hz was not measured for EGaIn {e} %; '
+                                 f'measured: {freqs} Hz')
+        elif not interpolate:
             raise ValueError(f'EGaIn {egain_vol_pct} % has no measured profile; expected one of {egains}')
-        freqs = self.frequencies(e)
-        f = min(freqs, key=lambda q: abs(q - frequency_hz))
-        if abs(f - frequency_hz) > tolerance_hz:
-            raise ValueError(f'frequency {frequency_hz} Hz was not measured for EGaIn {e} %; '
-                             f'measured: {freqs} Hz')
-        return self.profiles[(e, f)]
+        return self.interpolated_profile(egain_vol_pct, frequency_hz)
+
+    #: Scales that make the measured design grid square for the triangulation (10 %, 0.1 Hz).
+    INTERPOLATION_SCALES = (10.0, 0.1)
+
+    def interpolated_profile(self, egain_vol_pct: float, frequency_hz: float) -> CurvatureProfile:
+        """eq. 9 coefficients interpolated linearly between measured designs.
+
+        Method: the measured (EGaIn, frequency) designs, scaled by 10 % and 0.1 Hz so
+        their grid is square, are triangulated (Delaunay); a design inside a triangle gets
+        the barycentric average of its three corners' coefficients C1a-C4d and switch time
+        t0 (on a measured EGaIn line between two measured frequencies this is linear
+        interpolation in frequency between them). The cycle time is 1/f; ``rms_error`` is
+        the weighted RMS of the corners' fits (the fit error, not the interpolation error:
+        the leave-one-out test measures that). Outside the hull a ValueError names the
+        measured frequency range at the nearest measured EGaIn.
+        """
+        from scipy.spatial import Delaunay
+        keys = sorted(self.profiles)
+        if getattr(self, '_tri_keys', None) != keys:
+            se, sf = self.INTERPOLATION_SCALES
+            self._tri = Delaunay(np.array([(k[0] / se, k[1] / sf) for k in keys]))
+            self._tri_keys = keys
+        se, sf = self.INTERPOLATION_SCALES
+        q = np.array([float(egain_vol_pct) / se, float(frequency_hz) / sf])
+        simplex = int(self._tri.find_simplex(q, tol=1e-9))
+        if simplex < 0 or not (np.isfinite(egain_vol_pct) and np.isfinite(frequency_hz) and frequency_hz > 0):
+            egains = sorted({e for e, _ in keys})
+            near = min(egains, key=lambda v: abs(v - float(egain_vol_pct)))
+            fr = self.frequencies(near)
+            raise ValueError(f'EGaIn {egain_vol_pct} % at {frequency_hz} Hz is outside the measured designs '
+                             f'(EGaIn {egains[0]:g}-{egains[-1]:g} %; at {near:g} % measured {fr[0]:g}-{fr[-1]:g} Hz); '
+                             'no profile is extrapolated')
+        t = self._tri.transform[simplex]
+        b = t[:2] @ (q - t[2])
+        weights = np.array([b[0], b[1], 1.0 - b.sum()])
+        corners = [keys[i] for i in self._tri.simplices[simplex]]
+        profs = [self.profiles[k] for k in corners]
+        coef = sum(w * np.array(p.coefficients) for w, p in zip(weights, profs))
+        switch = float(sum(w * p.switch_time for w, p in zip(weights, profs)))
+        rms = float(np.sqrt(sum(w * p.rms_error ** 2 for w, p in zip(weights, profs))))
+        used = tuple((float(k[0]), float(k[1]), float(w)) for k, w in zip(corners, weights) if w > 1e-9)
+        return CurvatureProfile(float(egain_vol_pct), float(frequency_hz), tuple(float(c) for c in coef),
+                                switch, 1.0 / float(frequency_hz), rms, used)
 
     def nearest_profile(self, egain_vol_pct: float, frequency_hz: float) -> CurvatureProfile:
         """Profile at the measured frequency nearest to ``frequency_hz`` (no tolerance)."""

@@ -39,7 +39,8 @@ def drag_prefactors(network, fluid_density: float):
     return base * network.edge_drag_normal, base * network.edge_drag_tangent
 
 
-def lumped_masses(network, fluid_density: float, added_mass_coefficient: float) -> np.ndarray:
+def lumped_masses(network, fluid_density: float, added_mass_coefficient: float,
+                  added_mass_diameter=None, lumping_factor: float = 1.0) -> np.ndarray:
     """Revised nodal masses including added mass (paper eq. 3-4).
 
     Parameters
@@ -49,14 +50,20 @@ def lumped_masses(network, fluid_density: float, added_mass_coefficient: float) 
         rho_f [kg/m^3].
     added_mass_coefficient : float
         C_a [-].
+    added_mass_diameter : ndarray, shape (E,), optional
+        D of eq. 3 per edge (default: ``network.edge_diameter``).
+    lumping_factor : float
+        Share of the normal added mass lumped isotropically (1 = paper eq. 4; 0.5 = the
+        direction average of a section with added mass only normal to itself).
 
     Returns
     -------
     ndarray, shape (N,)
         m_i [kg].
     """
+    diameter = network.edge_diameter if added_mass_diameter is None else np.asarray(added_mass_diameter)
     per_length = (network.edge_linear_density
-                  + added_mass_coefficient * fluid_density * np.pi * network.edge_diameter ** 2 / 4.0)
+                  + lumping_factor * added_mass_coefficient * fluid_density * np.pi * diameter ** 2 / 4.0)
     half = 0.5 * per_length * network.edge_rest_length
     mass = np.zeros(network.n_nodes)
     np.add.at(mass, network.edges[:, 0], half)

@@ -8,17 +8,22 @@ Layout (robot frame ``frog``: x forward, y left, origin at the body centre):
 * limbs FL, FR, BL, BR: one rod of ``L_i`` per corner. Each corner node joins three
   edges and carries two bending energies (body corner + limb root), paper "Energy ...".
   The root direction is the lateral direction turned toward the rear by
-  ``-limb_root_angle_deg`` (default -75 deg: pointing aft, 15 deg outward of the body
-  axis, like frog legs). Fig. 2b does not give this angle; it was calibrated against
-  the 10 % EGaIn speed runs (see ``model_parameters``), as the paper did with C_bn.
+  ``-limb_root_angle_deg`` (rear limbs; default -90 deg: straight aft), the front limbs
+  ``front_root_angle_offset_deg`` further forward (default 32: 58 deg aft of lateral).
+  Fig. 2b gives no angle; both were calibrated jointly against the hardware turning
+  transitions and the speed experiments (``frog-sweep calibrate``, issue 11).
+* Fluid sections: the body's edges take its height as D in eq. 1 and 3 (H_f at the front
+  side to H_a at the rear, linear along the sides); the limb edges the strip width
+  ``limb_fluid_width``.
   The root bend (body side edge -> first limb edge) is the clamp of the limb: only
   its limb half cell bends, so its stiffness is 2 E(t) I (rigid body half in series),
   and it carries the limb curvature of that half cell, so that the whole limb length
   is curved (the polygon is inscribed in an arc tangent to the root direction). The
   limb's interior bends are actuated: natural curvature ``sign * kappa(t)`` (eq. 9),
-  stiffness ``E(t) I``. Relaxed aft-pointing limbs curl toward the body axis
-  (``limb_curl_direction = 'backward'``); the fast unrolling kick drives the robot
-  forward (+x), the slow re-curling (recovery) costs less because drag is quadratic.
+  stiffness ``E(t) I``. Relaxed aft-pointing limbs curl away from the body axis
+  (``limb_curl_direction = 'forward'``, calibrated, issue 11; ``'backward'`` curls them
+  toward it); the fast unrolling kick drives the robot forward (+x), the slow
+  re-curling (recovery) costs less because drag is quadratic.
 * No contact is modelled; a curled rear limb may overlap the body in the plane (in
   the robot the limbs sit below the foam body).
 """
@@ -201,7 +206,7 @@ def build_frog_model(params: FrogParameters | None = None, relaxed_curvature: fl
     n_limb = p.limb_edges
     turning = 2.0 * np.arctan(0.5 * relaxed_curvature * dl)  # kappa = 2 tan(phi/2)/dl
     limb_kw = dict(stretching_stiffness=p.limb_young_relaxed * p.limb_area,
-                   linear_density=p.limb_density * p.limb_area, diameter=2 * p.limb_radius,
+                   linear_density=p.limb_density * p.limb_area, diameter=p.limb_fluid_width,
                    drag_normal=p.limb_drag_normal, drag_tangent=p.limb_drag_tangent)
     limb_nodes, limb_sign, bend_ranges, edge_ranges, root_bends, root_base = {}, {}, {}, {}, {}, {}
     for limb in LIMB_NAMES:
@@ -209,7 +214,8 @@ def build_frog_model(params: FrogParameters | None = None, relaxed_curvature: fl
         side_nb, direction, sign = layout[limb]
         sign = int(sign * curl)
         # turn the lateral direction by the root angle (negative: toward the rear)
-        aft = np.radians(p.limb_root_angle_deg) * (-1.0 if direction[1] > 0 else 1.0)
+        root_deg = p.limb_root_angle_deg + (p.front_root_angle_offset_deg if limb in ('FL', 'FR') else 0.0)
+        aft = np.radians(root_deg) * (-1.0 if direction[1] > 0 else 1.0)
         direction = (np.cos(aft) * direction[0] - np.sin(aft) * direction[1],
                      np.sin(aft) * direction[0] + np.cos(aft) * direction[1])
         pts = _limb_points(ring[corner], direction, n_limb, dl, sign * turning)
@@ -230,7 +236,15 @@ def build_frog_model(params: FrogParameters | None = None, relaxed_curvature: fl
         limb_nodes[limb] = ids
         limb_sign[limb] = sign
     network = builder.build()
-    mass = lumped_masses(network, p.fluid_density, p.added_mass_coefficient)
+    if p.body_fluid_section == 'height':
+        # the body's sides are H_f (front) to H_a (rear) tall: D of eq. 1 and 3 (Fig. 2b)
+        body = network.edge_group == BODY_GROUP
+        mid_x = 0.5 * (network.positions[network.edges[:, 0], 0] + network.positions[network.edges[:, 1], 0])
+        share = np.clip((mid_x + half) / side, 0.0, 1.0)
+        network.edge_diameter[body] = (p.aft_dimension_ha
+                                       + (p.front_dimension_hf - p.aft_dimension_ha) * share[body])
+    lumping = 0.5 if p.added_mass_lumping == 'direction_average' else 1.0
+    mass = lumped_masses(network, p.fluid_density, p.added_mass_coefficient, lumping_factor=lumping)
     pose = network.positions - center_of_mass(network.positions, mass)
     assert n_ring == 4 * n
     return FrogModel(params=p, network=network, mass=mass, corner_nodes=corner_of,

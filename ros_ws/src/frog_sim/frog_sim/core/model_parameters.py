@@ -14,9 +14,18 @@ rods, limbs attached at the corners, paper: "each joint node at the corners ... 
 connected to three different nodes") and L_i as the length of each limb. This is the
 only reading consistent with the paper's node count: at dl = L_o / 23 = 3.91 mm the
 body ring has 92 nodes and each limb adds 9, giving exactly N = 128 (paper: "dl ~ 4 mm
-resulting in N_total = 128 nodes"). H_f and H_a (front/aft dimensions of the
-rendering) are not needed by the planar rod network and are kept here only for
-reference.
+resulting in N_total = 128 nodes"). H_f and H_a are read as the heights of the front
+and rear sides of the body (issue 11): they set the body's drag (eq. 1) and added mass
+(eq. 3) diameter, linear in between along the sides.
+
+Fluid model after issue 11 (``frog-sim fidelity``): the body's sections are its height
+instead of a 4 mm rod, the limbs are flat strips of a calibrated width, added mass is
+lumped with its direction average, and the sense of the relaxed curl, the front/rear
+root angles and C_bn are jointly calibrated against the hardware transitions and all
+experiment speeds (``frog-sweep calibrate``). ``frog_sim.calibration.LEGACY_MODEL``
+(``body_fluid_section='rod'``, ``limb_fluid_width=0.004``, ``added_mass_lumping='normal'``,
+``limb_curl_direction='backward'``, ``limb_root_angle_deg=-75``,
+``front_root_angle_offset_deg=0``, ``body_drag_normal=0.8``) restores the earlier model.
 """
 from __future__ import annotations
 
@@ -46,9 +55,9 @@ class FrogParameters:
     body_side_length: float = field(default=0.090, metadata={'range': (0.03, 0.3), 'unit': 'm'})
     # L_i [m]
     limb_length: float = field(default=0.035, metadata={'range': (0.01, 0.1), 'unit': 'm'})
-    # H_f [m] (reference only)
+    # H_f [m]: height of the front side (body_fluid_section='height')
     front_dimension_hf: float = field(default=0.035, metadata={'range': (0.005, 0.1), 'unit': 'm'})
-    # H_a [m] (reference only)
+    # H_a [m]: height of the rear side
     aft_dimension_ha: float = field(default=0.024, metadata={'range': (0.005, 0.1), 'unit': 'm'})
     # dl = L_o / 23 = 3.91 mm -> 128 nodes
     body_edges_per_side: int = field(default=23, metadata={'range': (2, 400), 'unit': '-'})
@@ -74,7 +83,7 @@ class FrogParameters:
     body_young_equivalent: float = field(default=26.0e6, metadata={'range': (1.0e6, 1.0e11), 'unit': 'Pa'})
     # [m] in-plane frame width (90 - 35) / 2 mm
     body_section_width: float = field(default=0.0275, metadata={'range': (0.002, 0.1), 'unit': 'm'})
-    # [m] D of the body rods in eq. 1, 3 (as the limbs)
+    # [m] D of the body rods in eq. 1, 3 with body_fluid_section='rod' (the earlier model)
     body_rod_diameter: float = field(default=0.004, metadata={'range': (0.001, 0.1), 'unit': 'm'})
     # --- fluid (paper, Hydrodynamic Characterization) ---
     # rho_f
@@ -83,8 +92,8 @@ class FrogParameters:
     limb_drag_normal: float = field(default=1.0, metadata={'range': (0.0, 5.0), 'unit': '-'})
     # C_lt
     limb_drag_tangent: float = field(default=0.01, metadata={'range': (0.0, 1.0), 'unit': '-'})
-    # C_bn (calibrated by the authors)
-    body_drag_normal: float = field(default=0.8, metadata={'range': (0.0, 5.0), 'unit': '-'})
+    # C_bn (jointly calibrated with the body's height section, issue 11; paper 0.8 with a 4 mm rod)
+    body_drag_normal: float = field(default=0.71, metadata={'range': (0.0, 5.0), 'unit': '-'})
     # C_bt
     body_drag_tangent: float = field(default=0.008, metadata={'range': (0.0, 1.0), 'unit': '-'})
     # C_a (theoretical value)
@@ -95,9 +104,21 @@ class FrogParameters:
     # one primitive per 1.5 s (DESIGN.md)
     primitive_period: float = field(default=1.5, metadata={'range': (0.2, 10.0), 'unit': 's'})
     # sense of the relaxed curl (see frog_model)
-    limb_curl_direction: str = field(default='backward', metadata={'choices': ('forward', 'backward'), 'unit': '-'})
+    limb_curl_direction: str = field(default='forward', metadata={'choices': ('forward', 'backward'), 'unit': '-'})
     # limb root direction: 0 lateral, -90 aft, +90 forward
-    limb_root_angle_deg: float = field(default=-75.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
+    limb_root_angle_deg: float = field(default=-90.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
+    # --- fluid sections (issue 11) ---
+    # 'rod': body drag/added mass with body_rod_diameter (the legacy 4 mm rod); 'height': the
+    # body's own height, H_f at the front side to H_a at the rear side (Fig. 2b)
+    body_fluid_section: str = field(default='height', metadata={'choices': ('rod', 'height'), 'unit': '-'})
+    # projected width of a limb strip normal to the swimming plane (drag eq. 1, added mass eq. 3)
+    limb_fluid_width: float = field(default=0.030, metadata={'range': (0.002, 0.03), 'unit': 'm'})
+    # eq. 4 lumping of added mass: 'normal' (paper: full normal value at every node) or
+    # 'direction_average' (half of it: a slender section has added mass only normal to itself)
+    added_mass_lumping: str = field(default='direction_average', metadata={'choices': ('normal', 'direction_average'),
+                                                              'unit': '-'})
+    # front limbs' root direction relative to the rear limbs' (0: all four alike)
+    front_root_angle_offset_deg: float = field(default=32.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
 
     def replace(self, **changes) -> 'FrogParameters':
         """Return a copy with some fields changed (validated)."""
@@ -134,6 +155,10 @@ class FrogParameters:
                              'must be in (0, 1]')
         if int(self.body_edges_per_side) < 2:
             raise ValueError(f'body_edges_per_side = {self.body_edges_per_side!r} must be >= 2')
+        for f in fields(self):
+            choices = f.metadata.get('choices')
+            if choices is not None and getattr(self, f.name) not in choices:
+                raise ValueError(f'{f.name} = {getattr(self, f.name)!r}, expected one of {choices}')
         if self.limb_curl_direction not in ('forward', 'backward'):
             raise ValueError(f"limb_curl_direction = {self.limb_curl_direction!r}, "
                              "expected 'forward' or 'backward'")
@@ -189,8 +214,8 @@ class FrogParameters:
 PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     'body_side_length': ('m', 'paper Fig. 2b L_o = 90 mm, read as body square side (gives N = 128)'),
     'limb_length': ('m', 'paper Fig. 2b L_i = 35 mm, read as limb length (gives N = 128)'),
-    'front_dimension_hf': ('m', 'paper Fig. 2b H_f = 35 mm; not used by the planar network'),
-    'aft_dimension_ha': ('m', 'paper Fig. 2b H_a = 24 mm; not used by the planar network'),
+    'front_dimension_hf': ('m', 'paper Fig. 2b H_f = 35 mm: height of the front side (body drag, added mass)'),
+    'aft_dimension_ha': ('m', 'paper Fig. 2b H_a = 24 mm: height of the rear side (body drag, added mass)'),
     'body_edges_per_side': ('-', 'dl = 90/23 = 3.91 mm ~ paper "dl ~ 4 mm, N = 128"'),
     'limb_radius': ('m', "authors' related code: limb rod radius ~2 mm (D = 4 mm in eq. 1, 3)"),
     'limb_young_relaxed': ('Pa', 'paper: E_0 = 3.0 MPa'),
@@ -204,27 +229,40 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
                   '+ PCB, foam, silicone'),
     'body_height': ('m', 'neutral buoyancy (paper: foam cancels battery weight): 150 g / '
                     '1000 kg/m^3 over the frame area 90^2 - 35^2 mm^2 = 22 mm (body EI, EA)'),
-    'body_rod_diameter': ('m', 'paper: "limbs and body are represented by rods with different '
-                          'densities" -> same rod diameter as the limbs (4 mm) in drag eq. 1 and '
-                          'added mass eq. 3; C_bn = 0.8 was calibrated by the authors with it'),
+    'body_rod_diameter': ('m', "D of the body rods in drag eq. 1 and added mass eq. 3 with body_fluid_section="
+                          "'rod' only (the earlier model: the limbs' 4 mm, with which the authors' C_bn = 0.8 "
+                          "was calibrated); the default 'height' section uses H_f/H_a"),
     'body_young_equivalent': ('Pa', 'assumption: "four elastic rods with high stiffness"; gives '
                               'body EI ~ 2.6e4 x limb EI so the body stays square'),
     'body_section_width': ('m', 'frame width (L_o - L_i)/2 = 27.5 mm'),
     'fluid_density': ('kg/m^3', 'paper: rho_f = 1000'),
     'limb_drag_normal': ('-', 'paper: C_ln = 1'),
     'limb_drag_tangent': ('-', 'paper: C_lt = 0.01'),
-    'body_drag_normal': ('-', 'paper: C_bn = 0.8 (calibrated on the 10 % runs)'),
+    'body_drag_normal': ('-', 'joint calibration (frog-sweep calibrate, issue 11): 0.71 with the body height '
+                         'section (paper: 0.8 with a 4 mm rod, calibrated on the 10 % runs only)'),
     'body_drag_tangent': ('-', 'paper: C_bt = 0.008 = C_bn / 100'),
     'added_mass_coefficient': ('-', 'paper: C_a = 1 (theoretical)'),
-    'limb_root_angle_deg': ('deg', 'calibrated (Fig. 2b gives no angle): limb root direction turned '
-                            'from lateral (0) toward the rear (-90 = pointing aft); sweep '
-                            '-90/-75/-60/-45 deg gave speed RMS 5.7/4.3/4.6/5.9 mm/s vs the 10 % '
-                            'calibration runs -> limbs point aft, 15 deg outward, like frog legs'),
+    'limb_root_angle_deg': ('deg', 'joint calibration (Fig. 2b gives no angle; issue 11): root direction of the '
+                            'rear limbs, turned from lateral (0) toward the rear: -90 = straight aft (the '
+                            'range bound). Was -75 from forward speed alone'),
+    'body_fluid_section': ('-', "'height': the body's sides are H_f (front) to H_a (rear) tall (Fig. 2b), so "
+                           "eq. 1 and 3 use that height as D; 'rod': the 4 mm body_rod_diameter"),
+    'limb_fluid_width': ('m', 'joint calibration (issue 11): projected width of the flat limb strip normal to the '
+                         'plane (Fig. 3a): 30 mm, the upper bound (~ the body height); not given by the paper '
+                         '(legacy: 4 mm = 2 r)'),
+    'added_mass_lumping': ('-', "eq. 4 lumps added mass isotropically; 'direction_average' uses half the normal "
+                           'value (a slender section has added mass only normal to itself: exact for a '
+                           "translating square ring); 'normal' = paper"),
+    'front_root_angle_offset_deg': ('deg', 'joint calibration (issue 11): front limbs turned by this much toward '
+                                    'the front relative to limb_root_angle_deg: 32 -> front limbs 58 deg aft of '
+                                    'lateral (Fig. 2b gives no angle for either pair)'),
     'pulse_duration': ('s', 'DESIGN.md hardware pulse 80 ms (paper characterisation 70 ms)'),
     'primitive_period': ('s', 'DESIGN.md: one primitive per 1.5 s'),
-    'limb_curl_direction': ('-', "'backward' = the curl turns a lateral limb toward the rear, i.e. an "
-                            'aft-pointing limb toward the body axis; the kick (unrolling) then drives '
-                            'the robot forward'),
+    'limb_curl_direction': ('-', "'forward' = the relaxed curl turns a lateral limb toward the front, i.e. "
+                            "an aft-pointing limb away from the body axis; 'backward' the other way. Not "
+                            "shown by the paper; joint calibration (issue 11): 'forward' (per-period "
+                            "heading changes within 25 % of the robot's), 'backward' (the earlier choice, "
+                            'from forward speed only) turns about half as much'),
 }
 
 

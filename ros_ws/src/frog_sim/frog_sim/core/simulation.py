@@ -23,13 +23,13 @@ from .rigid_body import HeadingUnwrapper, RigidBodyState, nodal_velocities, rigi
 from .schedules import LIMB_NAMES, ActivationSchedule
 
 #: Default time step [s], chosen from the dt convergence study (``frog-sim convergence``
-#: plus finer steps; 10 cycles at 1 Hz, 10 % EGaIn): the 10-cycle displacement is
-#: 398.1 / 406.3 / 408.0 / 406.9 / 404.2 / 401.3 / 399.3 / 398.2 mm at dt = 8 / 4 / 2 / 1 /
-#: 0.5 / 0.25 / 0.125 / 0.0625 ms. Below 0.5 ms the changes shrink (2.9, 2.0, 1.1 mm) toward
-#: ~397 mm; above, the error is not yet asymptotic because backward Euler damps the limb's
-#: bending modes (60 Hz - 1.5 kHz, no material damping in the model) more or less with dt.
-#: 2 ms is within 3 % of the dt -> 0 estimate and within 0.1 % / 2.4 % of 1 ms for 30 %
-#: EGaIn at 1.3 Hz / 50 % at 2 Hz (4 ms: 2.3 % / 5.2 %), at ~1/4 of the 1 ms cost.
+#: plus finer steps; 10 cycles at 1 Hz, 10 % EGaIn), rerun for the issue-11 fluid model:
+#: the 10-cycle displacement is 412.7 / 439.5 / 456.5 / 465.2 / 468.5 / 469.5 / 469.7 mm
+#: at dt = 8 / 4 / 2 / 1 / 0.5 / 0.25 / 0.125 ms: changes 26.8, 17.1, 8.6, 3.3, 1.0,
+#: 0.2 mm, first order down to 1 ms and faster below (dt -> 0: ~469.7 mm). 2 ms is 2.8 %
+#: below it and within 0.7 % / 0.05 % of 1 ms for 30 % EGaIn at 1.3 Hz / 50 % at 2 Hz
+#: (4 ms: 2.8 % / 3.3 %), with half the steps of 1 ms. Halving dl (46, 92 edges per side,
+#: 1 ms) changes it by 4.6 mm (1.0 %) and 0.4 mm.
 DEFAULT_TIME_STEP = 2.0e-3
 #: Default Newton force tolerance [N]: ~0.1 % of the nodal drag/inertia forces of a limb
 #: during a kick (~1e-3 N). Tightening it to 1e-8 N changes the 10-cycle displacement at

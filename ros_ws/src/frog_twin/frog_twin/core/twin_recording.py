@@ -19,7 +19,7 @@ TOPICS = {
     "truth": "/frog/sim/odom", "tracked": "/frog/odom", "status": "/frog/planner/status",
     "primitive": "/frog/primitive", "sent": "/frog/bridge/sent", "fired": "/frog/limb_activation",
     "path": "/frog/path", "shape": "/frog/sim/shape", "preview": "/camera/preview/compressed",
-    "camera_info": "/camera/camera_info",
+    "camera_info": "/camera/camera_info", "tf": "/tf",
 }
 
 
@@ -47,6 +47,7 @@ class TwinRecording:
     shapes: list = field(default_factory=list)       # (t, (K, 2) segment end points)
     preview: list = field(default_factory=list)      # (t, JPEG bytes)
     camera_info: object = None                       # last sensor_msgs/CameraInfo
+    tf_frames: dict = field(default_factory=dict)    # (parent, child) -> number of transforms
 
 
 def read_twin_recording(mcap_files, with_images: bool = True) -> TwinRecording:
@@ -79,6 +80,10 @@ def read_twin_recording(mcap_files, with_images: bool = True) -> TwinRecording:
                 rec.preview.append((_t(m.header.stamp), bytes(m.data)))
             elif topic == TOPICS["camera_info"]:
                 rec.camera_info = m
+            elif topic == TOPICS["tf"]:
+                for tr in m.transforms:
+                    key = (tr.header.frame_id, tr.child_frame_id)
+                    rec.tf_frames[key] = rec.tf_frames.get(key, 0) + 1
     order = lambda rows, width: np.array(sorted(rows), dtype=float).reshape(-1, width)  # noqa: E731
     rec.truth, rec.tracked, rec.status = order(truth, 4), order(tracked, 4), order(status, 9)
     for name in ("primitives", "sent", "fired", "shapes", "preview"):

@@ -49,6 +49,7 @@ def run_metrics(rec: TwinRecording, path_name: str) -> dict:
     m["latency_decision_to_firing"] = latency_stats(decided, [t for t, limbs in rec.fired if limbs])
     m["latency_decision_to_serial"] = latency_stats(decided, [t for t, limbs in rec.sent if limbs])
     m["limb_firings"] = sum(1 for _, limbs in rec.fired if limbs)
+    m["tf_frames"] = {f"{a} -> {b}": n for (a, b), n in sorted(rec.tf_frames.items())}
     m["hardware_mean_distance_cm"] = HARDWARE.get(path_name)
     m["hardware_speed_cm_per_s"] = HARDWARE["speed_cm_per_s"]
     m["units"] = {"distance": "m", "time": "s (simulated)", "speed": "m/s", "angle": "rad"}

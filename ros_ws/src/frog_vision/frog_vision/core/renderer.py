@@ -22,6 +22,8 @@ from frog_vision.core.tag_images import tag_border_cells, tag_image
 from frog_vision.core.tank_calibration import Board, CameraPose
 
 _CELL_PX = 8           # texture pixels per tag cell
+#: Corner jitter that gives the authors' measured pose noise at rest (see RenderSettings).
+AUTHORS_CORNER_JITTER_PX = 0.2
 
 
 @dataclasses.dataclass(frozen=True)

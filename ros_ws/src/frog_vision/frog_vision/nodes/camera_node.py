@@ -141,11 +141,15 @@ class CameraNode(Node):
             if self.source.is_file and self.cfg["loop"]:
                 self.source.rewind()
                 return
-            self.get_logger().error(f"camera source {self.cfg['source']!r} stopped delivering frames")
+            if self.source.is_file:
+                self.get_logger().info(f"end of the video file {self.cfg['source']!r}")
+            else:
+                self.get_logger().error(f"camera source {self.cfg['source']!r} stopped delivering frames"
+                                        + ("; reopening" if self.cfg["retry"] else ""))
             self.source.close()
             self.source = None
-            if not self.cfg["retry"] and self.cfg["source"] != "realsense" and os.path.isfile(self.cfg["source"]):
-                self.get_logger().info("end of the video file")
+            if not self.cfg["retry"]:
+                self.retry_timer.cancel()
             return
         if frame.ndim != 3 or frame.shape[2] != 3:
             self.get_logger().error(f"camera delivered a frame of shape {frame.shape}; expected BGR")

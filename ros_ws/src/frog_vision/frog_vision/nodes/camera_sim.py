@@ -27,7 +27,7 @@ from visualization_msgs.msg import Marker
 
 from frog_vision.core.camera_model import CameraModel
 from frog_vision.core.pose import compose_offset
-from frog_vision.core.renderer import Occluder, RenderSettings, TankRenderer, integrate_twist
+from frog_vision.core.renderer import AUTHORS_CORNER_JITTER_PX, Occluder, RenderSettings, TankRenderer, integrate_twist
 from frog_vision.core.robot_shape import RobotShape, shape_from_segments
 from frog_vision.core.tank_calibration import Board
 from frog_vision.nodes.common import load_camera, load_camera_pose
@@ -43,7 +43,9 @@ PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
     Param("noise_sigma", 2.0, "sensor noise [grey levels]", min=0.0, max=50.0),
     Param("brightness", 1.0, "global lighting gain", min=0.05, max=2.0),
     Param("lighting", 0.3, "uneven lighting: gain drop from the hot spot to the darkest corner", min=0.0, max=0.99),
-    Param("corner_jitter_px", 0.0, "per-frame random tag displacement (vibration, ripples) [px]", min=0.0, max=5.0),
+    Param("corner_jitter_px", AUTHORS_CORNER_JITTER_PX, "per-frame random tag displacement (vibration, "
+          "ripples) [px]; the default gives the authors' measured pose noise, 0 = an ideal camera",
+          min=0.0, max=5.0),
     Param("drop_probability", 0.0, "chance that a frame is lost", min=0.0, max=0.99),
     Param("seed", 0, "random seed (noise, drops, water texture)", min=0, max=2**31 - 1),
     Param("occlusion_start_s", -1.0, "hide the robot under an occluder from this node-clock time [s]; < 0 = never",

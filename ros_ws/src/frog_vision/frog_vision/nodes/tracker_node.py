@@ -16,7 +16,7 @@ import sys
 import cv2
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, TransformStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -56,6 +56,7 @@ PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
     Param("reset_timeout", _F.reset_timeout, "restart the filter after the tag was lost this long [s]",
           min=0.0, max=60.0),
     Param("publish_debug_image", False, "publish frog/tracker/debug_image (annotated frames)", live=True),
+    Param("publish_tf", True, "publish the tracked pose on tf as world_frame -> body_frame"),
 ]
 
 
@@ -95,6 +96,15 @@ class TrackerNode(Node):
         self.odom_pub = self.create_publisher(Odometry, "frog/odom", 10)
         self.debug_pub = self.create_publisher(Image, "frog/tracker/debug_image", 2)
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.tf_pub = None
+        if p["publish_tf"]:
+            try:
+                from tf2_msgs.msg import TFMessage
+            except ImportError:
+                self.get_logger().warning("tf2_msgs is not installed: not publishing tf")
+            else:
+                self._TFMessage = TFMessage
+                self.tf_pub = self.create_publisher(TFMessage, "tf", 100)
         self.window = collections.deque(maxlen=90)        # (detected, latency_s, compute_s, residual)
         self.frames = self.dropped = self.bad_frames = 0
         self.last_stamp = None
@@ -102,6 +112,7 @@ class TrackerNode(Node):
         self.state_name = "waiting for images"
         self.state_changed = False
         self.last_error = ""
+        self._logged_error = None
         # diagnostics every wall second (also on simulated time), and at each state change
         self.create_timer(1.0, self.publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"tracking {p['tag_family']} id {p['tag_id']} ({p['tag_size'] * 1e3:g} mm)")
@@ -129,9 +140,9 @@ class TrackerNode(Node):
                                self.cfg["search_window"])
 
     def _error(self, text: str) -> None:
-        if text != self.last_error:
+        if text != self._logged_error:            # a stream of the same bad frames is logged once
             self.get_logger().error(text)
-        self.last_error = text
+        self._logged_error = self.last_error = text
         self.bad_frames += 1
 
     def on_info(self, msg: CameraInfo) -> None:
@@ -171,13 +182,15 @@ class TrackerNode(Node):
                 self.dropped += int(round(gap / self.period)) - 1
         self.last_stamp = stamp
         self.frames += 1
+        self._logged_error = None                 # a good frame: log the next problem again
         res = self.tracker.process(img, stamp)
         before = self.state_name
         if res.state is not None:
             self.publish_state(msg.header.stamp, res.state)
             self.state_name = "coasting" if res.state.coasting else "tracking"
         else:
-            self.state_name = "lost" if self.tracker.filter.last_measurement is not None else "searching"
+            # lost (ERROR) once it has been tracked, also after the filter's reset
+            self.state_name = "lost" if self.tracker.n_measured > 0 else "searching"
         if self.state_name != before:
             why = f" ({res.reason})" if res.reason and self.state_name != "tracking" else ""
             if self.state_name == "lost":
@@ -210,6 +223,13 @@ class TrackerNode(Node):
         odom.pose.covariance = _planar_covariance(st.pose_covariance)
         odom.twist.covariance = _planar_covariance(st.twist_covariance)
         self.odom_pub.publish(odom)
+        if self.tf_pub is not None:
+            tf = TransformStamped()
+            tf.header = pose.header
+            tf.child_frame_id = self.cfg["body_frame"]
+            tf.transform.translation.x, tf.transform.translation.y = pose.pose.position.x, pose.pose.position.y
+            tf.transform.rotation = pose.pose.orientation
+            self.tf_pub.publish(self._TFMessage(transforms=[tf]))
 
     def _annotate(self, img, res):
         out = img.copy() if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
