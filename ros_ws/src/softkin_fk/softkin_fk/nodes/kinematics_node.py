@@ -111,7 +111,6 @@ class KinematicsNode(Node):
                                     callback_group=group)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self._stats = dict(solves=0, refused=0, last_solve_ms=0.0)
-        # also wakes the executor regularly, so SIGINT/SIGTERM are handled without traffic
         self.create_timer(1.0, self._publish_diagnostics)
         if p["publish_shape"]:
             self._publish_shape(self.kin.rest.positions)
