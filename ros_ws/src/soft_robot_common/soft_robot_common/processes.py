@@ -161,5 +161,7 @@ def _param_literal(v) -> str:
     if isinstance(v, (list, tuple)):
         return "[" + ",".join(_param_literal(x) for x in v) + "]"
     if isinstance(v, str):
-        return "'" + v + "'" if v == "" or re.fullmatch(r"[-+0-9.eE]+|true|false", v) else v
+        # quote what YAML would read as a number, a boolean (Y, no, on, ...) or null
+        yaml_words = r"[-+0-9.eE]+|(?i:true|false|y|n|yes|no|on|off|null)|~"
+        return "'" + v + "'" if v == "" or re.fullmatch(yaml_words, v) else v
     return str(v)
