@@ -4,8 +4,11 @@ against a known camera pose; and the filter against the authors' raw differences
 hardware logs.
 
 Sequences (30 fps, 640x480, camera 0.8 m over the tank, 47 mm tagStandard41h12 id 47):
-``sim`` = frog_sim's simulated frog executing primitives B E E E B F F F (one per 1.5 s),
-``syn`` = the synthetic strokes of ``frog_vision.core.synthetic`` (faster turns, 20 deg/s).
+``sim + kicks`` = frog_sim's simulated frog executing primitives B E E E B F F F (one per
+1.5 s), the tracker given the simulator's limb firings as kick inputs (as tracker_node gets
+them from ``frog/bridge/sent``); ``sim`` = the same frames without kick inputs (a
+camera-only tracker: the lower bound); ``syn`` = the synthetic strokes of
+``frog_vision.core.synthetic`` (faster turns, 20 deg/s; no kick inputs).
 Baseline in the same run: raw frame-to-frame differences of the same measured poses (the
 authors' method). Recovery: frames until the tag is accepted again after 1 s hidden.
 
@@ -54,8 +57,9 @@ def synthetic(duration):
 
 
 def accuracy_table(duration, quick, keep=None):
-    seqs = {"sim": simulated_sequence(duration), "syn": synthetic(duration)}
-    short = {"sim": simulated_sequence(5.0), "syn": synthetic(5.0)}
+    sim, sim_short = simulated_sequence(duration), simulated_sequence(5.0)
+    seqs = {"sim + kicks": sim, "sim": sim[:2], "syn": synthetic(duration)}
+    short = {"sim + kicks": sim_short, "sim": sim_short[:2], "syn": synthetic(5.0)}
     print("| level | seq | pos mean / max [mm] | heading mean [deg] | velocity RMS filter / raw [mm/s] (ratio) | "
           "yaw rate RMS filter / raw [deg/s] (ratio) | detection | recovery [frames] |")
     print("|---|---|---|---|---|---|---|---|")
