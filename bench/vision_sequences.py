@@ -12,9 +12,13 @@ from __future__ import annotations
 import numpy as np
 
 from frog_vision.core.evaluation import SequenceResult
+from frog_vision.core.pose import PoseSettings
 from frog_vision.core.renderer import Occluder
 from frog_vision.core.robot_shape import RobotShape, shape_from_segments
 from frog_vision.core.synthetic import Trajectory
+
+#: the sequences' pose is the body ring centre's (where the tag is): track it with no tag-to-body offset
+RING_CENTRE_POSE = PoseSettings(offset_x=0.0, offset_y=0.0, offset_yaw=0.0)
 
 #: a forward stroke (B: all four limbs), three turning strokes one way (E: the two left limbs),
 #: a forward stroke and three the other way (F: the two right limbs); the turns are the

@@ -137,3 +137,9 @@ def test_without_kicks_the_filter_is_unchanged_and_kicks_are_causal(rng):
     assert np.allclose(q_half, 0.5 * (q_before + q_in))
     with pytest.raises(ValueError, match="not finite"):
         f.kick(float("nan"))
+    # kick_delay shifts the window
+    f.settings = FilterSettings(kick_delay=0.1)
+    assert np.allclose(f._process_model(0.5, 0.6)[0], q_before)
+    assert np.allclose(f._process_model(0.6, 0.8)[0], q_in)
+    with pytest.raises(ValueError, match="kick_delay"):
+        FilterSettings(kick_delay=-0.1)

@@ -17,7 +17,7 @@ accelerating it within ~0.35 s, then it coasts, slowing down by drag over second
 process noise either lags the strokes or passes the pose noise through while it coasts. When
 the filter is told when limbs were fired (the bridge's ``frog/bridge/sent``, stamped at the
 write), it uses ``kick_accel_noise`` / ``kick_yaw_accel_noise`` for ``kick_window`` seconds
-after each firing, and the low ``coast_accel_noise`` / ``coast_yaw_accel_noise`` otherwise
+after each firing (``kick_delay`` later), and the low ``coast_accel_noise`` / ``coast_yaw_accel_noise`` otherwise
 (a step partly inside a window gets the time-weighted mean density), and while coasting
 the body twist decays by drag, ``d twist/dt = -twist / coast_drag_time`` (per axis; the
 frog slows from ~30 to ~20 mm/s over a 1.5 s primitive period). This switch is made by
@@ -62,6 +62,8 @@ class FilterSettings:
     # simulator's firing times (bench/vision_accuracy.py): a window after each pulse start (front
     # limbs, rear limbs 80 ms later) covers the ~0.35 s power stroke
     kick_window: float = 0.2              # [s] after each firing
+    kick_delay: float = 0.0               # [s] from the firing's stamp to the window (the simulator reacts at
+    #                                       once; raise it for a robot whose stroke lags the write)
     kick_accel_noise: float = 1e-4        # [(m/s^2)^2/Hz] inside a window
     kick_yaw_accel_noise: float = 1.0     # [(rad/s^2)^2/Hz]
     coast_accel_noise: float = 3e-6       # [(m/s^2)^2/Hz] between windows
@@ -77,6 +79,8 @@ class FilterSettings:
             v = getattr(self, name)
             if not (v > 0 and (np.isfinite(v) or name.endswith("drag_time"))):
                 raise ValueError(f"{name} = {v!r} must be > 0")
+        if not (np.isfinite(self.kick_delay) and self.kick_delay >= 0):
+            raise ValueError(f"kick_delay = {self.kick_delay!r} must be >= 0")
         if self.reset_timeout < self.coast_timeout:
             raise ValueError(f"reset_timeout = {self.reset_timeout} must be >= coast_timeout = "
                              f"{self.coast_timeout}")
@@ -150,7 +154,8 @@ class PoseFilter:
         self.inputs_known = True
         # windows that ended before the state's time cannot overlap a later step
         now = self.t if self.t is not None else -np.inf
-        self.kicks = [k for k in self.kicks if k + self.settings.kick_window > now] + [float(t)]
+        s = self.settings
+        self.kicks = [k for k in self.kicks if k + s.kick_delay + s.kick_window > now] + [float(t)]
 
     def _process_model(self, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
         """Spectral densities (x, y, yaw) over the step t0 -> t1 (mean over the step) and the
@@ -161,7 +166,7 @@ class PoseFilter:
         # time inside the union of kick windows during the step
         inside, end = 0.0, t0
         for k in sorted(self.kicks):
-            a, b = max(k, end), min(k + s.kick_window, t1)
+            a, b = max(k + s.kick_delay, end), min(k + s.kick_delay + s.kick_window, t1)
             if b > a:
                 inside += b - a
                 end = b

@@ -63,6 +63,8 @@ PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
           "empty = none"),
     Param("kick_window", _F.kick_window, "filter with kicks: follow the stroke this long after each firing [s]",
           min=0.01, max=5.0, live=True),
+    Param("kick_delay", _F.kick_delay, "filter with kicks: from a firing's stamp to the start of its window [s]",
+          min=0.0, max=2.0, live=True),
     Param("kick_accel_noise", _F.kick_accel_noise, "filter with kicks: linear acceleration noise density in a "
           "kick window [(m/s^2)^2/Hz]", min=1e-9, max=100.0, live=True),
     Param("kick_yaw_accel_noise", _F.kick_yaw_accel_noise, "filter with kicks: yaw acceleration noise density "
@@ -150,7 +152,8 @@ class TrackerNode(Node):
         drag = {k: p[k] if p[k] > 0 else np.inf for k in ("coast_drag_time", "coast_yaw_drag_time")}
         return FilterSettings(accel_noise=p["accel_noise"], yaw_accel_noise=p["yaw_accel_noise"],
                               coast_timeout=p["coast_timeout"], reset_timeout=p["reset_timeout"],
-                              kick_window=p["kick_window"], kick_accel_noise=p["kick_accel_noise"],
+                              kick_window=p["kick_window"], kick_delay=p["kick_delay"],
+                              kick_accel_noise=p["kick_accel_noise"],
                               kick_yaw_accel_noise=p["kick_yaw_accel_noise"],
                               coast_accel_noise=p["coast_accel_noise"],
                               coast_yaw_accel_noise=p["coast_yaw_accel_noise"], **drag)
