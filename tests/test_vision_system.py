@@ -227,8 +227,11 @@ def test_real_camera_chain_on_a_video_file(launch, probe, tmp_path):
     w.release()
     est = []
     probe.node.create_subscription(Odometry, "/frog/odom", est.append, QOS)
-    launch("camera_node", params={"source": str(path), "camera_info_file": str(tmp_path / "cam.yaml")})
+    # the tracker first: the 5 s file plays once from camera_node's start (a tracker still starting
+    # on a loaded machine would miss it)
     trk = launch("tracker_node", params={"tank_calibration_file": str(tmp_path / "tank.yaml")})
+    probe.wait_for_subscriber("/camera/image_raw", timeout=60)
+    launch("camera_node", params={"source": str(path), "camera_info_file": str(tmp_path / "cam.yaml")})
     probe.spin_until(lambda: len(est) >= 90, timeout=90, what="90 odometry messages")
     _, p, v = _odom_arrays(est)
     assert np.all(np.abs(p[:, 1] - 0.05) < 1e-3) and np.all(np.abs(p[:, 2]) < np.radians(0.5))
