@@ -4,8 +4,11 @@ against a known camera pose; and the filter against the authors' raw differences
 hardware logs.
 
 Sequences (30 fps, 640x480, camera 0.8 m over the tank, 47 mm tagStandard41h12 id 47):
-``sim`` = frog_sim's simulated frog executing primitives B E E E B F F F (one per 1.5 s),
-``syn`` = the synthetic strokes of ``frog_vision.core.synthetic`` (faster turns, 20 deg/s).
+``sim + kicks`` = frog_sim's simulated frog executing primitives B E E E B F F F (one per
+1.5 s), the tracker given the simulator's limb firings as kick inputs (as tracker_node gets
+them from ``frog/bridge/sent``); ``sim`` = the same frames without kick inputs (a
+camera-only tracker: the lower bound); ``syn`` = the synthetic strokes of
+``frog_vision.core.synthetic`` (faster turns, 20 deg/s; no kick inputs).
 Baseline in the same run: raw frame-to-frame differences of the same measured poses (the
 authors' method). Recovery: frames until the tag is accepted again after 1 s hidden.
 
@@ -29,7 +32,7 @@ from frog_vision.core.state_filter import PoseFilter, raw_differences  # noqa: E
 from frog_vision.core.synthetic import swim_and_turn  # noqa: E402
 from frog_vision.core.tank_calibration import Board, CameraPose, calibrate_tank  # noqa: E402
 from frog_vision.core.tracker import Tracker  # noqa: E402
-from vision_sequences import run_simulated, simulated_sequence  # noqa: E402
+from vision_sequences import RING_CENTRE_POSE, run_simulated, simulated_sequence  # noqa: E402
 
 CAM = CameraModel.realsense_640x480()
 DISTORTED = CameraModel(640, 480, CAM.K, [-0.12, 0.05, 0.001, -0.001, 0.0])
@@ -54,20 +57,23 @@ def synthetic(duration):
 
 
 def accuracy_table(duration, quick, keep=None):
-    seqs = {"sim": simulated_sequence(duration), "syn": synthetic(duration)}
-    short = {"sim": simulated_sequence(5.0), "syn": synthetic(5.0)}
+    sim, sim_short = simulated_sequence(duration), simulated_sequence(5.0)
+    seqs = {"sim + kicks": sim, "sim": sim[:2], "syn": synthetic(duration)}
+    short = {"sim + kicks": sim_short, "sim": sim_short[:2], "syn": synthetic(5.0)}
     print("| level | seq | pos mean / max [mm] | heading mean [deg] | velocity RMS filter / raw [mm/s] (ratio) | "
           "yaw rate RMS filter / raw [deg/s] (ratio) | detection | recovery [frames] |")
     print("|---|---|---|---|---|---|---|---|")
     for name, cam, kw in (LEVELS[:3] if quick else LEVELS):
         for sname, seq in seqs.items():
+            ps = None if sname == "syn" else RING_CENTRE_POSE     # syn: the pose is the centre of mass's
             r = TankRenderer(cam, POSE, RenderSettings(seed=1, **kw))
-            res = run_simulated(r, Tracker(cam, POSE), *seq)
+            res = run_simulated(r, Tracker(cam, POSE, pose=ps), *seq)
             m = res.metrics()
             if keep is not None and name.startswith("authors'"):
                 keep[sname] = res
             r2 = TankRenderer(cam, POSE, RenderSettings(seed=2, **kw))
-            rec = run_simulated(r2, Tracker(cam, POSE), *short[sname], occlusion=[(2.0, 3.0)]).frames_to_recover()
+            rec = run_simulated(r2, Tracker(cam, POSE, pose=ps), *short[sname],
+                                occlusion=[(2.0, 3.0)]).frames_to_recover()
             print(f"| {name} | {sname} | {m['position_mean_mm']:.3f} / {m['position_max_mm']:.3f} | "
                   f"{m['heading_mean_deg']:.3f} | {m['velocity_rms_mm_s']:.2f} / {m['raw_velocity_rms_mm_s']:.2f} "
                   f"({m['velocity_ratio']:.1f}x) | {m['yaw_rate_rms_deg_s']:.2f} / {m['raw_yaw_rate_rms_deg_s']:.2f} "

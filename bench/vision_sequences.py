@@ -4,16 +4,21 @@ and tests/test_vision_accuracy.py; outside any package core, so it may use both 
 The simulator executes a primitive every 1.5 s (forward and turning strokes); every
 camera frame (30 fps) is rendered from the simulator's exact state: centre-of-mass pose,
 body twist and rod network, with the tag on the body ring's centre (the pose is the ring
-centre's, the twist that point's body-frame velocity).
+centre's, the twist that point's body-frame velocity). The limb firings of the simulator's
+schedule come with it: the kick inputs that the bridge reports on ``frog/bridge/sent``.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from frog_vision.core.evaluation import SequenceResult
+from frog_vision.core.pose import PoseSettings
 from frog_vision.core.renderer import Occluder
 from frog_vision.core.robot_shape import RobotShape, shape_from_segments
 from frog_vision.core.synthetic import Trajectory
+
+#: the sequences' pose is the body ring centre's (where the tag is): track it with no tag-to-body offset
+RING_CENTRE_POSE = PoseSettings(offset_x=0.0, offset_y=0.0, offset_yaw=0.0)
 
 #: a forward stroke (B: all four limbs), three turning strokes one way (E: the two left limbs),
 #: a forward stroke and three the other way (F: the two right limbs); the turns are the
@@ -23,7 +28,8 @@ DEFAULT_PRIMITIVES = ("B", "E", "E", "E", "B", "F", "F", "F")
 
 def simulated_sequence(duration=10.0, fps=30.0, primitives=DEFAULT_PRIMITIVES, period=1.5,
                        start=(-0.05, -0.15, 0.6)):
-    """(Trajectory, list of body-frame RobotShape) of the simulated frog at the camera's times."""
+    """(Trajectory, list of body-frame RobotShape, kicks) of the simulated frog at the camera's
+    times; kicks: sorted firing times [s] (one per pulse start: front limbs, then rear limbs)."""
     from frog_sim.core.model_parameters import FrogParameters
     from frog_sim.core.simulation import FrogSimulation
     sim = FrogSimulation(FrogParameters())
@@ -53,18 +59,25 @@ def simulated_sequence(duration=10.0, fps=30.0, primitives=DEFAULT_PRIMITIVES, p
         ts.append(sim.time)
         poses.append(pose)
         twists.append([c * v[0] + sn * v[1], -sn * v[0] + c * v[1], s.yaw_rate])
-    return Trajectory(np.array(ts), np.array(poses), np.array(twists), np.zeros(len(ts))), shapes
+    fired = np.concatenate([np.asarray(v, float) for v in sim.schedule.per_limb()])
+    kicks = np.unique(np.round(fired[fired <= ts[-1]], 9))
+    return Trajectory(np.array(ts), np.array(poses), np.array(twists), np.zeros(len(ts))), shapes, kicks
 
 
-def run_simulated(renderer, tracker, truth: Trajectory, shapes, occlusion=()) -> SequenceResult:
+def run_simulated(renderer, tracker, truth: Trajectory, shapes, kicks=(), occlusion=()) -> SequenceResult:
     """Render and track a simulated sequence (like ``evaluation.run_sequence`` with the
-    simulator's shapes; the tag sits on each frame's ring centre)."""
+    simulator's shapes; the tag sits on each frame's ring centre). Each kick [s] is given to
+    the tracker before the first frame captured at or after it (as the node gets the bridge's
+    message, which is written before the stroke shows in a frame); ``kicks=()``: no inputs."""
     n = len(truth.t)
     measured, filtered, vel = (np.full((n, 3), np.nan) for _ in range(3))
     detected, occluded, dropped = (np.zeros(n, bool) for _ in range(3))
     compute = np.zeros(n)
+    pending = sorted(float(k) for k in kicks)
     for i in range(n):
         t = truth.t[i]
+        while pending and pending[0] <= t + 1e-9:
+            tracker.kick(pending.pop(0))
         sh = shapes[i]
         offset = (float(sh.ring_centre[0]), float(sh.ring_centre[1]), 0.0)
         occ = []

@@ -227,8 +227,11 @@ def test_real_camera_chain_on_a_video_file(launch, probe, tmp_path):
     w.release()
     est = []
     probe.node.create_subscription(Odometry, "/frog/odom", est.append, QOS)
-    launch("camera_node", params={"source": str(path), "camera_info_file": str(tmp_path / "cam.yaml")})
+    # the tracker first: the 5 s file plays once from camera_node's start (a tracker still starting
+    # on a loaded machine would miss it)
     trk = launch("tracker_node", params={"tank_calibration_file": str(tmp_path / "tank.yaml")})
+    probe.wait_for_subscriber("/camera/image_raw", timeout=60)
+    launch("camera_node", params={"source": str(path), "camera_info_file": str(tmp_path / "cam.yaml")})
     probe.spin_until(lambda: len(est) >= 90, timeout=90, what="90 odometry messages")
     _, p, v = _odom_arrays(est)
     assert np.all(np.abs(p[:, 1] - 0.05) < 1e-3) and np.all(np.abs(p[:, 2]) < np.radians(0.5))
@@ -261,6 +264,14 @@ def test_vision_parameters_ranges_live_sets_and_namespaces(launch, probe, tmp_pa
     # relative names: the namespaced tracker listens and publishes under /robot2
     probe.wait_for_subscriber("/robot2/camera/image_raw", timeout=20)
     probe.wait_for_topic("/robot2/frog/odom", timeout=20)
+    # kick inputs: the bridge's record of limb firings, under the namespace too
+    from soft_robot_interfaces.msg import LimbActivation
+    probe.wait_for_subscriber("/robot2/frog/bridge/sent", timeout=20)
+    kick_pub = probe.node.create_publisher(LimbActivation, "/robot2/frog/bridge/sent", 10)
+    kick = LimbActivation(limbs=[0, 1], pulse_duration=0.08)
+    kick.header.stamp.sec = 12
+    kick_pub.publish(kick)
+    nodes[1].wait_for_log("kick inputs from frog/bridge/sent", timeout=20)
     # live filter settings: in range accepted, out of range and read-only refused
     setp = probe.node.create_client(SetParameters, "/robot2/tracker_node/set_parameters")
     getp = probe.node.create_client(GetParameters, "/robot2/tracker_node/get_parameters")
@@ -270,7 +281,10 @@ def test_vision_parameters_ranges_live_sets_and_namespaces(launch, probe, tmp_pa
         return ParameterMsg(name=name, value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value))
     assert probe.call(setp, SetParameters.Request(parameters=[double("accel_noise", 1e-4)])).results[0].successful
     assert probe.call(getp, GetParameters.Request(names=["accel_noise"])).values[0].double_value == 1e-4
-    for param in (double("accel_noise", -1.0), double("tag_size", 0.05)):
+    res = probe.call(setp, SetParameters.Request(parameters=[double("kick_accel_noise", 1e-3),
+                                                             double("coast_drag_time", 0.0)])).results
+    assert len(res) == 2 and all(r.successful for r in res), res
+    for param in (double("accel_noise", -1.0), double("tag_size", 0.05), double("kick_window", 0.0)):
         assert not probe.call(setp, SetParameters.Request(parameters=[param])).results[0].successful
     for n in nodes:
         assert n.stop() == 0

@@ -15,7 +15,7 @@ import numpy as np
 
 from frog_vision.core.camera_model import CameraModel
 from frog_vision.core.detection import TAG_CORNERS_UNIT, Detection
-from frog_vision.core.robot_shape import COM_BEHIND_RING_CENTRE
+from frog_vision.core.robot_shape import COM_AHEAD_OF_RING_CENTRE
 from frog_vision.core.tank_calibration import CameraPose
 
 
@@ -32,7 +32,7 @@ class PoseSettings:
     offset_x, offset_y, offset_yaw : float
         Pose of the body frame in the tag frame [m, m, rad] (tag frame: x = printed tag's
         right, y = its top). Default: the tag on the body's centre, aligned with it; the
-        body frame's origin at the centre of mass, 0.26 mm behind (``robot_shape``).
+        body frame's origin at the centre of mass, 3.4 mm ahead (``robot_shape``).
     corner_sigma_px : float
         Corner noise used for the covariance [px]; the fit's own residual is used when larger.
     border_margin_px : float
@@ -44,7 +44,7 @@ class PoseSettings:
 
     tag_size: float = 0.047
     tag_height: float = 0.0
-    offset_x: float = -COM_BEHIND_RING_CENTRE
+    offset_x: float = COM_AHEAD_OF_RING_CENTRE
     offset_y: float = 0.0
     offset_yaw: float = 0.0
     corner_sigma_px: float = 0.2

@@ -18,11 +18,12 @@ BODY_FRAME_WIDTH = 0.0275  # in-plane width of the body frame (L_o - L_i) / 2 [m
 LIMB_LENGTH = 0.035        # L_i [m]
 LIMB_WIDTH = 0.004         # limb rod diameter [m]
 LIMB_ROOT_ANGLE = np.radians(-75.0)   # root direction from lateral toward aft
-#: Centre of mass relative to the body ring's centre, along the body's x axis [m]: the four
-#: limbs (~7 g of 157 g) hang aft. Measured on frog_sim's model at the default design over a
-#: 1 Hz gait: 0.26 +- 0.04 mm behind the centre, so it is also the default tag-to-body offset
-#: (the tag is glued on the body's centre).
-COM_BEHIND_RING_CENTRE = 0.00026
+#: Centre of mass relative to the body ring's centre, along the body's x axis [m]. Measured on
+#: frog_sim's recalibrated model (issue 11; its rigid-body centre includes the limbs' added
+#: mass, eq. 10) at the default design over a 1 Hz gait, in the frame of its heading:
+#: 3.36 +- 0.31 mm AHEAD of the ring's centre (the model before issue 11: 0.26 mm behind). It is
+#: also the default tag-to-body offset (the tag is glued on the body's centre).
+COM_AHEAD_OF_RING_CENTRE = 0.00336
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,7 +101,7 @@ def shape_from_segments(segments) -> RobotShape:
 
 def frog_outline(limb_curl: float = 0.0, edges_per_side: int = 23, limb_edges: int = 9) -> RobotShape:
     """The robot's rod network at rest in the body frame (origin at the centre of mass, so
-    the ring's centre is ``COM_BEHIND_RING_CENTRE`` ahead of it).
+    the ring's centre is ``COM_AHEAD_OF_RING_CENTRE`` behind it).
 
     Parameters
     ----------
@@ -122,5 +123,5 @@ def frog_outline(limb_curl: float = 0.0, edges_per_side: int = 23, limb_edges: i
             limbs.append([p, q])
             p = q
             ang += side * limb_curl * ds
-    shift = np.array([COM_BEHIND_RING_CENTRE, 0.0])
+    shift = np.array([-COM_AHEAD_OF_RING_CENTRE, 0.0])
     return RobotShape(ring + shift, np.array(limbs) + shift)

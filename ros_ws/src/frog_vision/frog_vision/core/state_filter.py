@@ -12,6 +12,21 @@ primitives, with the authors' level of pose noise (``bench/vision_accuracy.py``)
 values smooth more but lag more behind a stroke. For faster manoeuvres (the synthetic
 sequences' 20 deg/s turning strokes) a larger ``yaw_accel_noise`` (0.1) is better.
 
+Kick inputs (optional, :meth:`PoseFilter.kick`): the frog moves by impulses, an SMA stroke
+accelerating it within ~0.35 s, then it coasts, slowing down by drag over seconds. A single
+process noise either lags the strokes or passes the pose noise through while it coasts. When
+the filter is told when limbs were fired (the bridge's ``frog/bridge/sent``, stamped at the
+write), it uses ``kick_accel_noise`` / ``kick_yaw_accel_noise`` for ``kick_window`` seconds
+after each firing (``kick_delay`` later), and the low ``coast_accel_noise`` / ``coast_yaw_accel_noise`` otherwise
+(a step partly inside a window gets the time-weighted mean density), and while coasting
+the body twist decays by drag, ``d twist/dt = -twist / coast_drag_time`` (per axis; the
+frog slows from ~30 to ~20 mm/s over a 1.5 s primitive period). This switch is made by
+the first kick reported: from then on the filter assumes that every firing is reported
+(nothing else makes the robot accelerate; a robot moved by hand is still caught by the
+jump restart below). Without kick inputs it uses ``accel_noise`` / ``yaw_accel_noise``
+throughout, as a filter that knows nothing about the inputs must. The estimate stays causal:
+a kick only changes the predictions after its stamp.
+
 Heading measurements are unwrapped against the prediction; measurements further than a
 chi-square gate from the prediction are rejected as outliers (a wrong quad, a tag half out
 of view) unless several in a row agree (then the robot really moved: the filter restarts
@@ -43,13 +58,29 @@ class FilterSettings:
     reset_timeout: float = 1.0         # [s] forget the state after this long without a measurement
     initial_speed_sigma: float = 0.05  # [m/s] initial velocity uncertainty
     initial_yaw_rate_sigma: float = 1.0  # [rad/s]
+    # with kick inputs (see the module docstring); tuned on the same rendered sequences with the
+    # simulator's firing times (bench/vision_accuracy.py): a window after each pulse start (front
+    # limbs, rear limbs 80 ms later) covers the ~0.35 s power stroke
+    kick_window: float = 0.2              # [s] after each firing
+    kick_delay: float = 0.0               # [s] from the firing's stamp to the window (the simulator reacts at
+    #                                       once; raise it for a robot whose stroke lags the write)
+    kick_accel_noise: float = 1e-4        # [(m/s^2)^2/Hz] inside a window
+    kick_yaw_accel_noise: float = 1.0     # [(rad/s^2)^2/Hz]
+    coast_accel_noise: float = 3e-6       # [(m/s^2)^2/Hz] between windows
+    coast_yaw_accel_noise: float = 1e-3   # [(rad/s^2)^2/Hz]
+    coast_drag_time: float = 8.0          # [s] between windows the body velocities decay with this time constant
+    coast_yaw_drag_time: float = 5.0      # [s] ... and the yaw rate with this one (np.inf: no drag)
 
     def __post_init__(self):
         for name in ("accel_noise", "yaw_accel_noise", "gate_chi2", "coast_timeout",
-                     "reset_timeout", "initial_speed_sigma", "initial_yaw_rate_sigma"):
+                     "reset_timeout", "initial_speed_sigma", "initial_yaw_rate_sigma", "kick_window",
+                     "kick_accel_noise", "kick_yaw_accel_noise", "coast_accel_noise", "coast_yaw_accel_noise",
+                     "coast_drag_time", "coast_yaw_drag_time"):
             v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
+            if not (v > 0 and (np.isfinite(v) or name.endswith("drag_time"))):
                 raise ValueError(f"{name} = {v!r} must be > 0")
+        if not (np.isfinite(self.kick_delay) and self.kick_delay >= 0):
+            raise ValueError(f"kick_delay = {self.kick_delay!r} must be >= 0")
         if self.reset_timeout < self.coast_timeout:
             raise ValueError(f"reset_timeout = {self.reset_timeout} must be >= coast_timeout = "
                              f"{self.coast_timeout}")
@@ -95,6 +126,8 @@ class PoseFilter:
 
     def __init__(self, settings: FilterSettings | None = None):
         self.settings = settings or FilterSettings()
+        self.kicks: list[float] = []        # the robot's inputs, not the track's: kept over resets
+        self.inputs_known = False
         self.reset()
 
     def reset(self) -> None:
@@ -106,6 +139,43 @@ class PoseFilter:
         self._rejected: list = []
         self.n_rejected = 0
         self.n_resets = 0
+
+    def kick(self, t: float) -> None:
+        """Limbs were fired at ``t`` [s] (same clock as the image stamps): inflate the process
+        noise for ``kick_window`` after ``t`` and, from now on, keep it low between kicks.
+
+        Raises
+        ------
+        ValueError
+            ``t`` is not finite.
+        """
+        if not np.isfinite(t):
+            raise ValueError(f"kick time {t!r} is not finite")
+        self.inputs_known = True
+        # windows that ended before the state's time cannot overlap a later step
+        now = self.t if self.t is not None else -np.inf
+        s = self.settings
+        self.kicks = [k for k in self.kicks if k + s.kick_delay + s.kick_window > now] + [float(t)]
+
+    def _process_model(self, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+        """Spectral densities (x, y, yaw) over the step t0 -> t1 (mean over the step) and the
+        twist's decay exponents over it (the twist is multiplied by ``exp(-rate)``)."""
+        s = self.settings
+        if not self.inputs_known:
+            return np.array([s.accel_noise] * 2 + [s.yaw_accel_noise]), np.zeros(3)
+        # time inside the union of kick windows during the step
+        inside, end = 0.0, t0
+        for k in sorted(self.kicks):
+            a, b = max(k + s.kick_delay, end), min(k + s.kick_delay + s.kick_window, t1)
+            if b > a:
+                inside += b - a
+                end = b
+        f = inside / (t1 - t0)
+        low = np.array([s.coast_accel_noise] * 2 + [s.coast_yaw_accel_noise])
+        high = np.array([s.kick_accel_noise] * 2 + [s.kick_yaw_accel_noise])
+        # drag only while coasting (inside a window the limbs drive the robot)
+        rate = (1 - f) * (t1 - t0) / np.array([s.coast_drag_time] * 2 + [s.coast_yaw_drag_time])
+        return (1 - f) * low + f * high, rate
 
     @property
     def initialised(self) -> bool:
@@ -124,17 +194,23 @@ class PoseFilter:
         dt = t - self.t
         if dt <= 0:
             return self.x.copy(), self.P.copy()
-        # constant body twist: the pose moves along an arc (exact), the twist stays
-        x = np.concatenate([_move(self.x[:3], self.x[3:], dt), self.x[3:]])
+        q, r = self._process_model(self.t, t)
+        decay = np.exp(-r)
+        # constant body twist: the pose moves along an arc (exact), the twist stays; coasting with
+        # drag (decay < 1), the arc at the step's mean twist (the twist changes < 1 % per frame)
+        mean = np.where(r > 1e-12, -np.expm1(-r) / np.maximum(r, 1e-12), 1.0)
+        x = np.concatenate([_move(self.x[:3], mean * self.x[3:], dt), decay * self.x[3:]])
         F = np.eye(6)
+        F[3:, 3:] = np.diag(decay)
         h = 1e-6
         for j in range(3, 6):                       # d pose / d twist (numerical), d pose / d heading
             dx = np.zeros(3)
             dx[j - 3] = h
-            F[:3, j] = (_move(self.x[:3], self.x[3:] + dx, dt) - _move(self.x[:3], self.x[3:] - dx, dt)) / (2 * h)
+            F[:3, j] = (_move(self.x[:3], mean * (self.x[3:] + dx), dt)
+                        - _move(self.x[:3], mean * (self.x[3:] - dx), dt)) / (2 * h)
         dth = np.array([0, 0, h])
-        F[:3, 2] = (_move(self.x[:3] + dth, self.x[3:], dt) - _move(self.x[:3] - dth, self.x[3:], dt)) / (2 * h)
-        q = np.array([self.settings.accel_noise] * 2 + [self.settings.yaw_accel_noise])
+        F[:3, 2] = (_move(self.x[:3] + dth, mean * self.x[3:], dt)
+                    - _move(self.x[:3] - dth, mean * self.x[3:], dt)) / (2 * h)
         Q = np.zeros((6, 6))
         Q[:3, :3] = np.diag(q * dt ** 3 / 3)
         Q[3:, 3:] = np.diag(q * dt)

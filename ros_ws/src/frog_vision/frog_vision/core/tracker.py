@@ -99,6 +99,10 @@ class Tracker:
         x1, y1 = uv.max(axis=0)
         return int(x0), int(y0), int(np.ceil(x1)) + 1, int(np.ceil(y1)) + 1
 
+    def kick(self, stamp: float) -> None:
+        """Limbs were fired at ``stamp`` [s] (the filter's kick input, see ``state_filter``)."""
+        self.filter.kick(stamp)
+
     def process(self, image: np.ndarray, stamp: float) -> TrackResult:
         """Detect, measure and filter one frame captured at ``stamp`` [s].
 

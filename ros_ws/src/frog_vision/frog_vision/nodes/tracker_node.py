@@ -7,6 +7,13 @@ annotated ``frog/tracker/debug_image`` when ``publish_debug_image``; and ``diagn
 (detection rate, capture-to-publish latency, dropped frames, reprojection error). When the
 tag has been lost longer than ``coast_timeout`` nothing is published (no stale poses) and
 the diagnostics say so.
+
+Kick inputs: with ``kick_topic`` set (default ``frog/bridge/sent``, the bridge's record of
+every limb firing written to the robot, soft_robot_interfaces/LimbActivation stamped at the
+write) each firing is given to the filter, which then follows the power stroke for
+``kick_window`` and uses a low process noise with drag while the robot coasts (see
+``frog_vision.core.state_filter``). Until the first firing arrives, or with
+``kick_topic`` empty, the filter runs on ``accel_noise`` / ``yaw_accel_noise`` alone.
 """
 from __future__ import annotations
 
@@ -23,6 +30,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_interfaces.msg import LimbActivation
 
 from frog_vision.core.detection import DetectorSettings
 from frog_vision.core.pose import PoseSettings
@@ -51,6 +59,24 @@ PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
           min=1e-9, max=100.0, live=True),
     Param("yaw_accel_noise", _F.yaw_accel_noise, "filter: yaw acceleration noise density [(rad/s^2)^2/Hz]",
           min=1e-9, max=1000.0, live=True),
+    Param("kick_topic", "frog/bridge/sent", "limb firings (LimbActivation) fed to the filter as kick inputs; "
+          "empty = none"),
+    Param("kick_window", _F.kick_window, "filter with kicks: follow the stroke this long after each firing [s]",
+          min=0.01, max=5.0, live=True),
+    Param("kick_delay", _F.kick_delay, "filter with kicks: from a firing's stamp to the start of its window [s]",
+          min=0.0, max=2.0, live=True),
+    Param("kick_accel_noise", _F.kick_accel_noise, "filter with kicks: linear acceleration noise density in a "
+          "kick window [(m/s^2)^2/Hz]", min=1e-9, max=100.0, live=True),
+    Param("kick_yaw_accel_noise", _F.kick_yaw_accel_noise, "filter with kicks: yaw acceleration noise density "
+          "in a kick window [(rad/s^2)^2/Hz]", min=1e-9, max=1000.0, live=True),
+    Param("coast_accel_noise", _F.coast_accel_noise, "filter with kicks: linear acceleration noise density "
+          "between kicks [(m/s^2)^2/Hz]", min=1e-12, max=100.0, live=True),
+    Param("coast_yaw_accel_noise", _F.coast_yaw_accel_noise, "filter with kicks: yaw acceleration noise density "
+          "between kicks [(rad/s^2)^2/Hz]", min=1e-12, max=1000.0, live=True),
+    Param("coast_drag_time", _F.coast_drag_time, "filter with kicks: decay time of the body velocities between "
+          "kicks [s]; 0 = no drag", min=0.0, max=1000.0, live=True),
+    Param("coast_yaw_drag_time", _F.coast_yaw_drag_time, "filter with kicks: decay time of the yaw rate between "
+          "kicks [s]; 0 = no drag", min=0.0, max=1000.0, live=True),
     Param("coast_timeout", _F.coast_timeout, "publish predictions this long after the tag is lost [s]",
           min=0.0, max=10.0),
     Param("reset_timeout", _F.reset_timeout, "restart the filter after the tag was lost this long [s]",
@@ -84,6 +110,7 @@ class TrackerNode(Node):
         except ValueError as exc:
             raise ConfigurationError(str(exc)) from exc
         self.tracker: Tracker | None = None
+        self.last_kick: float | None = None       # stamp of the last limb firing [s]
         if self.fixed_camera is not None:
             self._make_tracker(self.fixed_camera)
         # keep the last 2 only: a busy tracker skips frames instead of working through a growing
@@ -92,6 +119,9 @@ class TrackerNode(Node):
         sensor = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(Image, "camera/image_raw", self.on_image, sensor)
         self.create_subscription(CameraInfo, "camera/camera_info", self.on_info, sensor)
+        if p["kick_topic"]:
+            self.create_subscription(LimbActivation, p["kick_topic"], self.on_kick,
+                                     QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self.pose_pub = self.create_publisher(PoseStamped, "frog/pose", 10)
         self.odom_pub = self.create_publisher(Odometry, "frog/odom", 10)
         self.debug_pub = self.create_publisher(Image, "frog/tracker/debug_image", 2)
@@ -119,8 +149,14 @@ class TrackerNode(Node):
 
     @staticmethod
     def _filter_settings(p) -> FilterSettings:
+        drag = {k: p[k] if p[k] > 0 else np.inf for k in ("coast_drag_time", "coast_yaw_drag_time")}
         return FilterSettings(accel_noise=p["accel_noise"], yaw_accel_noise=p["yaw_accel_noise"],
-                              coast_timeout=p["coast_timeout"], reset_timeout=p["reset_timeout"])
+                              coast_timeout=p["coast_timeout"], reset_timeout=p["reset_timeout"],
+                              kick_window=p["kick_window"], kick_delay=p["kick_delay"],
+                              kick_accel_noise=p["kick_accel_noise"],
+                              kick_yaw_accel_noise=p["kick_yaw_accel_noise"],
+                              coast_accel_noise=p["coast_accel_noise"],
+                              coast_yaw_accel_noise=p["coast_yaw_accel_noise"], **drag)
 
     def _validate(self, values: dict) -> str | None:
         try:
@@ -138,6 +174,22 @@ class TrackerNode(Node):
     def _make_tracker(self, camera) -> None:
         self.tracker = Tracker(camera, self.camera_pose, self.detector, self.pose_settings, self.filter_settings,
                                self.cfg["search_window"])
+        if self.last_kick is not None:            # a firing before the first camera_info still counts
+            self.tracker.kick(self.last_kick)
+
+    def on_kick(self, msg: LimbActivation) -> None:
+        if not msg.limbs:                         # nothing was heated
+            return
+        stamp = stamp_to_s(msg.header.stamp)
+        if not np.isfinite(stamp) or stamp <= 0:
+            self._error(f"ignored limb firing with stamp {stamp!r}")
+            return
+        if self.last_kick is None:
+            self.get_logger().info(f"kick inputs from {self.cfg['kick_topic']}: filtering with the stroke model")
+        self.last_kick = stamp
+        self.get_logger().debug(f"kick at {stamp:.3f} s: limbs {list(msg.limbs)}")
+        if self.tracker is not None:
+            self.tracker.kick(stamp)
 
     def _error(self, text: str) -> None:
         if text != self._logged_error:            # a stream of the same bad frames is logged once
