@@ -184,7 +184,7 @@ def test_disk_full_is_logged_node_stays_up_and_data_is_salvageable(launch, probe
     out = tmp_path / "rec"
     rec = launch("recorder", params={"output_dir": str(out), "file_prefix": "full",
                                      "topics": ["/odom"], "compression": "none",
-                                     "retry_period_s": 3.0},
+                                     "retry_period_s": 3.0, "flush_period_s": 0.1},  # small chunks: several fit
                  preexec_fn=_limit_file_size)
     probe.wait_for_node("/recorder", timeout=20)
     diags = []
