@@ -11,9 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from frog_vision.core.evaluation import SequenceResult
+from frog_vision.core.evaluation import SequenceResult, run_sequence
 from frog_vision.core.pose import PoseSettings
-from frog_vision.core.renderer import Occluder
 from frog_vision.core.robot_shape import RobotShape, shape_from_segments
 from frog_vision.core.synthetic import Trajectory
 
@@ -69,31 +68,4 @@ def run_simulated(renderer, tracker, truth: Trajectory, shapes, kicks=(), occlus
     simulator's shapes; the tag sits on each frame's ring centre). Each kick [s] is given to
     the tracker before the first frame captured at or after it (as the node gets the bridge's
     message, which is written before the stroke shows in a frame); ``kicks=()``: no inputs."""
-    n = len(truth.t)
-    measured, filtered, vel = (np.full((n, 3), np.nan) for _ in range(3))
-    detected, occluded, dropped = (np.zeros(n, bool) for _ in range(3))
-    compute = np.zeros(n)
-    pending = sorted(float(k) for k in kicks)
-    for i in range(n):
-        t = truth.t[i]
-        while pending and pending[0] <= t + 1e-9:
-            tracker.kick(pending.pop(0))
-        sh = shapes[i]
-        offset = (float(sh.ring_centre[0]), float(sh.ring_centre[1]), 0.0)
-        occ = []
-        if any(a <= t < b for a, b in occlusion):
-            occ = [Occluder(truth.pose[i, 0], truth.pose[i, 1], 0.07)]
-            occluded[i] = True
-        if renderer.should_drop():
-            dropped[i] = True
-            continue
-        img = renderer.render(truth.pose[i], truth.twist[i], sh, offset, occ)
-        r = tracker.process(img, float(t))
-        compute[i] = r.compute_s
-        if r.measurement is not None:
-            measured[i] = r.measurement.pose
-            detected[i] = True
-        if r.state is not None:
-            filtered[i] = r.state.pose
-            vel[i] = r.state.body_velocity
-    return SequenceResult(truth, measured, filtered, vel, detected, occluded, dropped, compute)
+    return run_sequence(renderer, tracker, truth, occlusion, shapes=shapes, kicks=kicks, occluder_radius=0.07)

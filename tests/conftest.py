@@ -97,3 +97,16 @@ def serial_pair():
             os.close(fd)
         except OSError:
             pass
+
+
+@pytest.fixture
+def library(tmp_path):
+    """A small kinematic motion library in the contract's file format (frog_planner's test helper)."""
+    import importlib.util
+    helper = Path(__file__).resolve().parents[1] / "ros_ws" / "src" / "frog_planner" / "test" / "synthetic_library.py"
+    spec = importlib.util.spec_from_file_location("system_tests_synthetic_library", helper)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    path = tmp_path / "synthetic.npz"
+    mod.write_library(path, n_states=60, horizon=1.5)
+    return path

@@ -1,9 +1,7 @@
 """planner_node as a real process: decisions, latched path, idle reasons, bad input."""
 
-import importlib.util
 import math
 import time
-from pathlib import Path
 
 import pytest
 from nav_msgs.msg import Odometry
@@ -16,19 +14,8 @@ pytestmark = pytest.mark.system
 QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-SYNTH = (Path(__file__).resolve().parents[1] / "ros_ws" / "src" / "frog_planner" / "test"
-         / "synthetic_library.py")
 
 
-@pytest.fixture
-def library(tmp_path):
-    """A small kinematic library in the contract's file format (planner tests' helper)."""
-    spec = importlib.util.spec_from_file_location("planner_synthetic_library_sys", SYNTH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    path = tmp_path / "synthetic.npz"
-    mod.write_library(path, n_states=60, horizon=1.5)
-    return path
 
 
 def _odom(x, y, yaw, v=0.01):

@@ -4,9 +4,7 @@ Real node processes on an isolated domain; parameters are described and set thro
 parameter services that ``ros2 param describe/set`` use.
 """
 
-import importlib.util
 import math
-from pathlib import Path
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
@@ -21,18 +19,8 @@ from std_srvs.srv import Trigger
 pytestmark = pytest.mark.system
 
 QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-SYNTH = (Path(__file__).resolve().parents[1] / "ros_ws" / "src" / "frog_planner" / "test"
-         / "synthetic_library.py")
 
 
-@pytest.fixture
-def library(tmp_path):
-    spec = importlib.util.spec_from_file_location("planner_synthetic_library_conv", SYNTH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    path = tmp_path / "synthetic.npz"
-    mod.write_library(path, n_states=60, horizon=1.5)
-    return path
 
 
 def _stamp(msg) -> float:
@@ -77,7 +65,9 @@ def test_two_frogs_in_two_namespaces_do_not_cross_talk(launch, probe, library):
         assert probe.node.count_subscribers(f"{ns}/frog/primitive") == 1
         assert probe.node.count_subscribers(f"{ns}/frog/odom") == 1
         first = next(s for s in status[ns] if s.state == PlannerStatus.STATE_FOLLOWING)
-        assert first.distance_to_path == pytest.approx(y, abs=0.01), (ns, first.distance_to_path)
+        # its own frog's offset (cross-talk would give the other's: 0.2 m apart); a few cm of
+        # margin, since the first status received may come after a kick or two
+        assert first.distance_to_path == pytest.approx(y, abs=0.05), (ns, first.distance_to_path)
         assert abs(odom[ns][-1].pose.pose.position.y - y) < 0.05
     assert probe.node.count_publishers("/frog/sim/odom") == 0
     assert probe.node.count_publishers("/frog/primitive") == 0

@@ -73,7 +73,8 @@ class SequenceResult:
 
 
 def run_sequence(renderer: TankRenderer, tracker: Tracker, truth: Trajectory, occlusion=(),
-                 tag_offset=None, progress=None) -> SequenceResult:
+                 tag_offset=None, progress=None, shapes=None, kicks=(),
+                 occluder_radius: float = 0.06) -> SequenceResult:
     """Render every frame of ``truth`` and track it.
 
     Parameters
@@ -84,6 +85,14 @@ def run_sequence(renderer: TankRenderer, tracker: Tracker, truth: Trajectory, oc
         The tag's pose in the body frame (default: ring centre).
     progress : callable, optional
         Wraps the frame iterator (e.g. ``tqdm``).
+    shapes : sequence of RobotShape, optional
+        One body-frame shape per frame (e.g. the simulator's); the tag then sits on each
+        frame's ring centre. Default: the outline with ``truth.limb_curl``.
+    kicks : sequence of float
+        Limb firing times [s], each given to the tracker before the first frame captured
+        at or after it (as the node gets the bridge's message); empty: no inputs.
+    occluder_radius : float
+        Radius of the occluder [m].
     """
     n = len(truth.t)
     measured = np.full((n, 3), np.nan)
@@ -93,14 +102,21 @@ def run_sequence(renderer: TankRenderer, tracker: Tracker, truth: Trajectory, oc
     occluded = np.zeros(n, bool)
     dropped = np.zeros(n, bool)
     compute = np.zeros(n)
+    pending = sorted(float(k) for k in kicks)
     frames = range(n) if progress is None else progress(range(n))
     for i in frames:
         t = truth.t[i]
-        shape = frog_outline(limb_curl=float(truth.limb_curl[i]))
+        while pending and pending[0] <= t + 1e-9:
+            tracker.kick(pending.pop(0))
+        if shapes is not None:
+            shape = shapes[i]
+            tag_offset = (float(shape.ring_centre[0]), float(shape.ring_centre[1]), 0.0)
+        else:
+            shape = frog_outline(limb_curl=float(truth.limb_curl[i]))
         occ = []
         if any(a <= t < b for a, b in occlusion):
             p = truth.pose[i]
-            occ = [Occluder(p[0], p[1], 0.06)]
+            occ = [Occluder(p[0], p[1], occluder_radius)]
             occluded[i] = True
         if renderer.should_drop():
             dropped[i] = True
