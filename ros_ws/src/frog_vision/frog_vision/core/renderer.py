@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from frog_vision.core.camera_model import CameraModel
+from frog_vision.core.planar_motion import integrate_twist
 from frog_vision.core.robot_shape import BODY_FRAME_WIDTH, BODY_SIDE, LIMB_WIDTH, RobotShape, frog_outline
 from frog_vision.core.tag_images import tag_border_cells, tag_image
 from frog_vision.core.tank_calibration import Board, CameraPose
@@ -101,18 +102,6 @@ class Occluder:
     radius: float
 
 
-def integrate_twist(pose, twist, dt: float) -> np.ndarray:
-    """Pose after moving for ``dt`` [s] at a constant body twist (forward, lateral, yaw rate)."""
-    x, y, a = pose
-    vx, vy, w = twist
-    if abs(w * dt) < 1e-9:
-        dx, dy = vx * dt, vy * dt
-    else:
-        s, c = np.sin(w * dt), np.cos(w * dt)
-        dx = (vx * s - vy * (1 - c)) / w
-        dy = (vx * (1 - c) + vy * s) / w
-    ca, sa = np.cos(a), np.sin(a)
-    return np.array([x + ca * dx - sa * dy, y + sa * dx + ca * dy, a + w * dt])
 
 
 class TankRenderer:

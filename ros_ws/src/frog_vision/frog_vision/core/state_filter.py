@@ -40,6 +40,7 @@ import dataclasses
 
 import numpy as np
 
+from frog_vision.core.planar_motion import integrate_twist
 #: Chi-square 99.9 % quantile with 3 degrees of freedom.
 CHI2_3DOF_999 = 16.27
 
@@ -199,18 +200,18 @@ class PoseFilter:
         # constant body twist: the pose moves along an arc (exact), the twist stays; coasting with
         # drag (decay < 1), the arc at the step's mean twist (the twist changes < 1 % per frame)
         mean = np.where(r > 1e-12, -np.expm1(-r) / np.maximum(r, 1e-12), 1.0)
-        x = np.concatenate([_move(self.x[:3], mean * self.x[3:], dt), decay * self.x[3:]])
+        x = np.concatenate([integrate_twist(self.x[:3], mean * self.x[3:], dt), decay * self.x[3:]])
         F = np.eye(6)
         F[3:, 3:] = np.diag(decay)
         h = 1e-6
         for j in range(3, 6):                       # d pose / d twist (numerical), d pose / d heading
             dx = np.zeros(3)
             dx[j - 3] = h
-            F[:3, j] = (_move(self.x[:3], mean * (self.x[3:] + dx), dt)
-                        - _move(self.x[:3], mean * (self.x[3:] - dx), dt)) / (2 * h)
+            F[:3, j] = (integrate_twist(self.x[:3], mean * (self.x[3:] + dx), dt)
+                        - integrate_twist(self.x[:3], mean * (self.x[3:] - dx), dt)) / (2 * h)
         dth = np.array([0, 0, h])
-        F[:3, 2] = (_move(self.x[:3] + dth, mean * self.x[3:], dt)
-                    - _move(self.x[:3] - dth, mean * self.x[3:], dt)) / (2 * h)
+        F[:3, 2] = (integrate_twist(self.x[:3] + dth, mean * self.x[3:], dt)
+                    - integrate_twist(self.x[:3] - dth, mean * self.x[3:], dt)) / (2 * h)
         Q = np.zeros((6, 6))
         Q[:3, :3] = np.diag(q * dt ** 3 / 3)
         Q[3:, 3:] = np.diag(q * dt)
@@ -281,20 +282,6 @@ class PoseFilter:
         x, P = self._predicted(t) if t > self.t else (self.x, self.P)
         coast = (t > self.last_measurement) if coasting is None else coasting
         return RobotState(float(t), x[:3].copy(), x[3:].copy(), P[:3, :3].copy(), P[3:, 3:].copy(), coast)
-
-
-def _move(pose, twist, dt):
-    """Pose after ``dt`` at a constant body twist (forward, lateral, yaw rate)."""
-    x, y, a = pose
-    vx, vy, w = twist
-    if abs(w * dt) < 1e-9:
-        dx, dy = vx * dt, vy * dt
-    else:
-        sw, cw = np.sin(w * dt), np.cos(w * dt)
-        dx = (vx * sw - vy * (1 - cw)) / w
-        dy = (vx * (1 - cw) + vy * sw) / w
-    ca, sa = np.cos(a), np.sin(a)
-    return np.array([x + ca * dx - sa * dy, y + sa * dx + ca * dy, a + w * dt])
 
 
 def raw_differences(stamps, poses) -> np.ndarray:
