@@ -208,6 +208,25 @@ def test_emergency_latches_until_cleared_and_protection_refuses(launch, probe, t
     assert emu.stop() == 0 and bridge.stop() == 0
 
 
+def test_non_finite_pulse_length_is_refused_and_fires_nothing(launch, probe, tmp_path):
+    """issue 23.1: ``pulse_duration: .nan`` on frog/limb_command used to reach the pty as ``h 1``."""
+    from soft_robot_interfaces.msg import LimbActivation
+    emu, bridge, log = start_pair(launch, probe, tmp_path, emulator_params={"imu_rate_hz": 0.0})
+    limb_pub = probe.node.create_publisher(LimbActivation, "/frog/limb_command", QOS)
+    probe.wait_for_subscriber("/frog/limb_command")
+    t_cmd = time.time()
+    for bad in (float("nan"), float("inf"), -1.0):
+        limb_pub.publish(LimbActivation(limbs=[1], pulse_duration=bad))
+    # one publisher, reliable: the valid command arrives after the three bad ones
+    limb_pub.publish(LimbActivation(limbs=[2], pulse_duration=0.0))
+    probe.spin_until(lambda: h_lines(read_log(log), after=t_cmd), 10, "the valid command's h line")
+    bridge.wait_for_log(r"pulse_duration -1\.0 s is not a finite length", timeout=5)
+    text = bridge.log_text()
+    assert "pulse_duration nan s is not a finite length" in text and "pulse_duration inf s" in text
+    assert [line for _, line in h_lines(read_log(log), after=t_cmd)] == ["h 2"]
+    assert emu.stop() == 0 and bridge.stop() == 0
+
+
 def test_unplug_replug_reconnects_without_stale_commands_and_stall_is_reported(launch, probe, tmp_path):
     from soft_robot_interfaces.msg import Primitive
     emu, bridge, log = start_pair(

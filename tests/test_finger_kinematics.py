@@ -139,6 +139,12 @@ def test_bad_requests_are_refused_with_a_reason(finger):
         (fk, ForwardKinematics.Request(actuation=[1.0, 1.0]), "expected 3"),
         (fk, ForwardKinematics.Request(actuation=[0.5, 1.0, 1.0]), "outside its range"),
         (fk, ForwardKinematics.Request(actuation=[1.0, math.inf, 1.0]), "not finite"),
+        # issue 23.2: a NaN tolerance was accepted, a negative one failed inside the solver
+        (ik, SolveIk.Request(target=Point(x=0.1, y=0.05, z=0.0125), tolerance=math.nan), "tolerance nan"),
+        (ik, SolveIk.Request(target=Point(x=0.1, y=0.05, z=0.0125), tolerance=math.inf), "tolerance inf"),
+        (ik, SolveIk.Request(target=Point(x=0.1, y=0.05, z=0.0125), tolerance=-1.0), "tolerance -1.0"),
+        (ik, SolveIk.Request(target=Point(x=0.1, y=0.05, z=0.0125), max_iterations=4_000_000_000),
+         "max_iterations"),
     ]
     for cli, req, why in cases:
         res = probe.call(cli, req)
@@ -293,6 +299,36 @@ def test_follow_curve_cancel_and_bad_goals(finger):
         assert why in res_fut.result().result.message, res_fut.result().result.message
     assert proc.running()
     assert os.environ["ROS_PYTHON_CHECK_FIELDS"] == "1"
+
+
+def test_non_finite_tolerance_and_huge_counts_move_nothing(finger):
+    """issue 23.2: ``tolerance: .nan`` sent three unsolved setpoints and SUCCEEDED; a huge
+    ``n_waypoints`` was a MemoryError. Each is now aborted with the field named, nothing sent."""
+    from action_msgs.msg import GoalStatus
+    from soft_robot_interfaces.action import FollowCurve
+    proc, probe = finger
+    setpoints = []
+    probe.node.create_subscription(JointState, "/finger/tendon_setpoints", setpoints.append, QOS)
+    probe.wait_for_topic("/finger/tendon_setpoints", timeout=20)
+    for goal, why in ((FollowCurve.Goal(curve="L", n_waypoints=3, tolerance=math.nan), "tolerance nan"),
+                      (FollowCurve.Goal(curve="L", n_waypoints=3, tolerance=-1.0), "tolerance -1.0"),
+                      (FollowCurve.Goal(curve="L", n_waypoints=3, tolerance=math.inf), "tolerance inf"),
+                      (FollowCurve.Goal(curve="L", n_waypoints=4_000_000_000), "n_waypoints 4000000000")):
+        client, handle = _send_goal(probe, goal, [])
+        res_fut = handle.get_result_async()
+        probe.spin_until(res_fut.done, 30, "aborted result")
+        out = res_fut.result()
+        assert out.status == GoalStatus.STATUS_ABORTED and why in out.result.message, out.result.message
+    # a valid target afterwards is the only command that reaches the setpoints
+    pub = probe.node.create_publisher(PointStamped, "/finger/target", 10)
+    probe.wait_for_subscriber("/finger/target", timeout=20)
+    m = PointStamped()
+    m.header.frame_id = "finger_base"
+    m.point = Point(x=0.1, y=0.055, z=0.0125)
+    pub.publish(m)
+    probe.spin_until(lambda: setpoints, 30, "the valid target's setpoints")
+    probe.spin_for(0.3)
+    assert len(setpoints) == 1 and proc.running()
 
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "ros_ws" / "src" / "softkin_fk" / "examples"

@@ -119,6 +119,17 @@ def test_invalid_limb_commands():
     assert d.accepted and d.pulses[0].limbs == (0, 2)
 
 
+def test_non_finite_or_negative_pulse_length_is_refused_not_fired():
+    # abs(nan - 0.08) > tol is False: a NaN must not pass as "close to the bridge's pulse"
+    s = sched()
+    for bad in (float("nan"), float("inf"), -float("inf"), -1.0, 0.2):
+        d = s.submit_limbs([1], None, 0.0, pulse_s=bad)
+        assert d.refused == REFUSED_INVALID and "pulse_duration" in d.reason, bad
+    assert s.pending == [] and s.counts[REFUSED_INVALID] == 5
+    assert s.submit_limbs([1], None, 0.0, pulse_s=P).accepted
+    assert s.submit_limbs([2], None, 0.0, pulse_s=0.0).accepted
+
+
 def test_guard_clock_jump_back_clears_history():
     g = LimbGuard(ProtectionConfig(0.8, 0.1, 10.0))
     g.record(PlannedPulse(100.0, (0,), P))

@@ -15,6 +15,7 @@ Times are seconds on one clock chosen by the caller (the node's clock).
 from __future__ import annotations
 
 import itertools
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -119,8 +120,20 @@ class CommandScheduler:
             pulses.append(TimedPulse(now + self.pulse_s, rear, self.pulse_s, f"{name} rear", cid))
         return self._schedule(pulses, f"primitive {name}")
 
-    def submit_limbs(self, limbs, stamp: float | None, now: float) -> Decision:
-        """Schedule one pulse of ``limbs`` now (a direct limb command from a tool)."""
+    def submit_limbs(self, limbs, stamp: float | None, now: float, pulse_s: float = 0.0) -> Decision:
+        """Schedule one pulse of ``limbs`` now (a direct limb command from a tool).
+
+        ``pulse_s`` is the pulse length the sender asks for: 0 means the bridge's own; any
+        other value must equal it (the relay has one pulse length, set once with ``p``).
+        """
+        # NaN compares False with everything: test finiteness first, or NaN passes as "close"
+        if not math.isfinite(pulse_s) or pulse_s < 0.0:
+            return self._refuse(REFUSED_INVALID, f"limb command pulse_duration {pulse_s!r} s is not a finite "
+                                                 f"length >= 0 (send 0 for the bridge's pulse {self.pulse_s:g} s)")
+        if pulse_s and abs(pulse_s - self.pulse_s) > 5e-4:
+            return self._refuse(REFUSED_INVALID, f"limb command pulse_duration {pulse_s!r} s differs from the "
+                                                 f"bridge's pulse {self.pulse_s:g} s (set once with 'p'; send 0 "
+                                                 f"or change pulse_ms)")
         limbs = tuple(limbs)
         if not limbs or len(set(limbs)) != len(limbs) or any(i not in (0, 1, 2, 3) for i in limbs):
             return self._refuse(REFUSED_INVALID, f"limb ids {list(limbs)} must be distinct, in 0-3, "

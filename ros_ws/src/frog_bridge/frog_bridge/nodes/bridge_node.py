@@ -163,14 +163,10 @@ class BridgeNode(Node):
     def on_limb_command(self, msg) -> None:
         t_in = time.perf_counter()
         limbs = list(msg.limbs)
-        if msg.pulse_duration and abs(msg.pulse_duration - self.pulse_s) > 5e-4:
-            self._refuse(REFUSED_INVALID, f"limb command pulse_duration {msg.pulse_duration!r} s differs from the "
-                                          f"bridge's pulse {self.pulse_s:g} s (set once with 'p'; send 0 or "
-                                          f"change pulse_ms)")
-            return
         if not self._link_allows(f"limb command {limb_names(limbs)}"):
             return
-        self._decided(self.scheduler.submit_limbs(limbs, _stamp_s(msg.header.stamp), self._now()), t_in)
+        self._decided(self.scheduler.submit_limbs(limbs, _stamp_s(msg.header.stamp), self._now(),
+                                                  msg.pulse_duration), t_in)
 
     def _refuse(self, key: str, reason: str, throttle: bool = False) -> None:
         self.scheduler.count_refusal(key)

@@ -35,6 +35,37 @@ class RequestError(ValueError):
     """A request the model refuses (bad shape, not finite, out of bounds, absurd target)."""
 
 
+#: Accepted error thresholds lambda [m] (the node's ``tolerance`` parameter has the same range).
+LAM_RANGE = (1e-6, 0.01)
+#: Largest iteration limit a request may ask for.
+MAX_ITERATIONS = 1000
+#: Most waypoints one trajectory may have (a built-in curve's samples or given points).
+MAX_WAYPOINTS = 10_000
+
+
+def check_tolerance(lam: float, default: float) -> float:
+    """A request's threshold lambda [m]: 0 means ``default``; NaN, inf or out of range is refused."""
+    lam = float(lam)
+    if lam == 0.0:
+        return default
+    # NaN compares False with everything: "error <= nan" would report every waypoint missed
+    # but the setpoints would still be sent
+    if not np.isfinite(lam) or not LAM_RANGE[0] <= lam <= LAM_RANGE[1]:
+        raise RequestError(f"tolerance {lam!r} m is not finite in [{LAM_RANGE[0]:g}, {LAM_RANGE[1]:g}] m "
+                           f"(0 = the node's default {default:g} m)")
+    return lam
+
+
+def check_iterations(i_max: int, default: int) -> int:
+    """A request's iteration limit: 0 means ``default``; above :data:`MAX_ITERATIONS` is refused."""
+    i_max = int(i_max)
+    if i_max == 0:
+        return default
+    if not 1 <= i_max <= MAX_ITERATIONS:
+        raise RequestError(f"max_iterations {i_max} is not in 1-{MAX_ITERATIONS} (0 = the node's default {default})")
+    return i_max
+
+
 @dataclasses.dataclass
 class IKSettings:
     """Inverse-kinematics settings (Algorithm 2)."""
@@ -228,7 +259,7 @@ class RobotKinematics:
         """
         s = self.settings
         p = self.check_target(target)
-        lam, i_max = lam or s.lam, i_max or s.i_max
+        lam, i_max = check_tolerance(lam, s.lam), check_iterations(i_max, s.i_max)
         kw = dict(markers=(self.marker,), lam=lam, i_max=i_max, jacobian=s.jacobian, direction=s.direction,
                   fk_tol=s.fk_tol)
         if initial is not None and len(initial):
@@ -281,12 +312,14 @@ class RobotKinematics:
                 raise RequestError(f"unknown curve {curve!r}; built-in curves: {', '.join(sorted(CURVES))}")
             if self.mesh.info.get('model') != 'tendon_finger':
                 raise RequestError("the built-in curves lie in the finger's workspace; give waypoints for this robot")
-            if n and n < 2:
-                raise RequestError(f"n_waypoints {n} must be 0 (default) or >= 2")
+            if n and not 2 <= n <= MAX_WAYPOINTS:
+                raise RequestError(f"n_waypoints {n} must be 0 (default) or in 2-{MAX_WAYPOINTS}")
             return CURVES[curve](n) if n else CURVES[curve]()
         P = np.asarray(points if points is not None else [], float).reshape(-1, 3)
         if len(P) == 0:
             raise RequestError("no curve name and no waypoints given")
+        if len(P) > MAX_WAYPOINTS:
+            raise RequestError(f"{len(P)} waypoints given; at most {MAX_WAYPOINTS}")
         for i, p in enumerate(P):
             try:
                 self.check_target(p)
@@ -299,5 +332,5 @@ class RobotKinematics:
         """Algorithm 3 on checked waypoints; ``on_waypoint`` may return False to stop (cancel)."""
         s = self.settings
         return follow_trajectory(self.solver, waypoints, self.config_space, marker=self.marker,
-                                 on_waypoint=on_waypoint, lam=lam or s.lam, i_max=s.i_max, jacobian=s.jacobian,
+                                 on_waypoint=on_waypoint, lam=check_tolerance(lam, s.lam), i_max=s.i_max, jacobian=s.jacobian,
                                  direction=s.direction, fk_tol=s.fk_tol)

@@ -34,7 +34,8 @@ from soft_robot_interfaces.action import FollowCurve
 from soft_robot_interfaces.srv import ForwardKinematics, SolveIk
 from visualization_msgs.msg import Marker
 
-from ..core.kinematics import IKSettings, RequestError, RobotKinematics, load_robot
+from ..core.kinematics import (LAM_RANGE, MAX_ITERATIONS, IKSettings, RequestError, RobotKinematics, check_tolerance,
+                               load_robot)
 from ..core.worker import SolverWorker
 
 PARAMS = [
@@ -49,8 +50,9 @@ PARAMS = [
     Param("jacobian", "implicit", "IK Jacobian: implicit-function sensitivity (fast) or the paper's central "
           "differences", choices=("implicit", "central")),
     Param("direction", "gauss-newton", "IK search direction", choices=("gauss-newton", "gradient")),
-    Param("tolerance", 2e-4, "IK error threshold lambda [m] (0.2 mm in the paper)", min=1e-6, max=0.01, live=True),
-    Param("max_iterations", 30, "IK iteration limit i_max", min=1, max=1000, live=True),
+    Param("tolerance", 2e-4, "IK error threshold lambda [m] (0.2 mm in the paper)", min=LAM_RANGE[0],
+          max=LAM_RANGE[1], live=True),
+    Param("max_iterations", 30, "IK iteration limit i_max", min=1, max=MAX_ITERATIONS, live=True),
     Param("fk_tolerance", 1e-7, "forward-kinematics tolerance [m]", min=1e-10, max=1e-4),
     Param("max_target_distance", 0.0, "targets farther than this from the robot's rest bounding box are refused "
           "[m]; 0 = the box diagonal", min=0.0, max=100.0),
@@ -243,7 +245,7 @@ class KinematicsNode(Node):
         res.reached = _point(r.reached[0])
         res.residual_error = float(r.error)
         res.iterations = int(r.iterations)
-        lam = req.tolerance or self.kin.settings.lam
+        lam = check_tolerance(req.tolerance, self.kin.settings.lam)   # checked by the solve already
         res.message = (f"reached within {r.error * 1e3:.3f} mm" if r.success else
                        f"target out of reach: nearest point found is {r.error * 1e3:.3f} mm away "
                        f"(tolerance {lam * 1e3:.3f} mm)")
@@ -281,13 +283,13 @@ class KinematicsNode(Node):
         try:
             if g.frame_id not in ("", self.frame):
                 raise RequestError(f"frame '{g.frame_id}' is not the base frame '{self.frame}'")
+            lam = check_tolerance(g.tolerance, self.kin.settings.lam)
             P = self.kin.waypoints(g.curve, int(g.n_waypoints), [[w.x, w.y, w.z] for w in g.waypoints])
         except RequestError as exc:
             result.message = f"goal refused: {exc}"
             log.error(f"follow_curve {result.message}")
             goal_handle.abort()
             return result
-        lam = g.tolerance or self.kin.settings.lam
         log.info(f"follow_curve: {len(P)} waypoints ({g.curve or 'given'}), tolerance {lam * 1e3:.3f} mm"
                  + (" (dry run)" if g.dry_run else ""))
 
