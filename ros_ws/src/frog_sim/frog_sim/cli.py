@@ -30,7 +30,7 @@ EXAMPLES = """examples:
   FROG_DATA_DIR=../shared/data/frog frog-sim fit --write-package-data
   frog-sim validate --out runs/validation
   frog-sim convergence --out runs/convergence
-  frog-sim fidelity --out runs/fidelity                 # table, PNGs, fidelity.json
+  frog-sim fidelity --out runs/fidelity                 # table, PNGs, fidelity.json (incl. N-period replays)
   frog-sim fidelity --no-speeds --set body_drag_normal=1.2 --set limb_root_angle_deg=-60
 """
 
@@ -116,6 +116,8 @@ def build_parser() -> argparse.ArgumentParser:
     fi.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
                     help='override a model parameter (repeatable), e.g. body_drag_normal=1.2')
     fi.add_argument('--dt', type=_positive('--dt'), default=None)
+    fi.add_argument('--replay-periods', type=int, default=5, metavar='N',
+                    help='replay the logged primitive sequences open loop for 1..N periods (0: skip; default 5)')
     fi.add_argument('--quiet', action='store_true', help='no progress bar')
     return parser
 
@@ -343,7 +345,9 @@ def cmd_fidelity(args):
     except ValueError as exc:
         raise CliError(str(exc)) from None
     config = FidelityConfig(time_step=args.dt or DEFAULT_TIME_STEP, speeds=not args.no_speeds,
-                            tag_offset_deg=args.tag_offset_deg)
+                            tag_offset_deg=args.tag_offset_deg, replay_periods=args.replay_periods)
+    if not 0 <= args.replay_periods <= 10:
+        raise CliError(f'--replay-periods {args.replay_periods} must be in 0-10')
     if args.latency is not None:
         if not 0.0 <= args.latency < 1.0:
             raise CliError(f'--latency {args.latency} must be in [0, 1) s')

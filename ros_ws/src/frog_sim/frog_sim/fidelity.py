@@ -13,6 +13,9 @@ What is compared (all from ``shared/data/frog``):
   allow: local fits). From rest, a single E kick: the yaw rate 1.5 s after firing vs
   its peak (issue target <= 30 %).
 * **Repeated kicks**: E every period from rest: steady yaw rate and the time to 63 %.
+* **N-period replays** (issue 18): the robot's logged primitive sequence replayed open
+  loop from each decision's measured state for N = 1..5 periods
+  (:mod:`frog_sim.multi_period`): heading ratio, RMS heading and position error vs N.
 * **Coasting**: 25 mm/s forward with no kick: speed after 5 s and 20 s, distance in 60 s.
 * **Speeds**: steady speed (phase 0.5) vs the 10 % calibration runs and vs every
   experiment speed (``experiment_speeds.csv``); the fastest and the most efficient design
@@ -72,6 +75,7 @@ class FidelityConfig:
     coast_speed: float = 0.025
     coast_duration: float = 60.0
     repeat_periods: int = 12
+    replay_periods: int = 5
 
 
 # ------------------------------------------------------------------ real data
@@ -328,6 +332,7 @@ class FidelityReport:
     coasting: dict
     speeds: dict | None
     pairs: list = field(default_factory=list)
+    replays: dict | None = None
 
     def to_json(self) -> str:
         def conv(o):
@@ -362,6 +367,13 @@ def fidelity_report(params: FrogParameters | None = None, config: FidelityConfig
         real = real_transitions(folder, config.runs, config.tag_offset_deg)
     trs, info = real
     sim = FrogSimulation(params, time_step=config.time_step, library=library)
+    replays = None
+    if config.replay_periods > 0:
+        from . import multi_period as mp
+        folder = find_data_file(f'hardware_runs/{config.runs[0]}.csv').parent
+        logs = hr.read_hardware_runs(folder, config.runs)
+        windows = mp.real_windows(logs, info['tag_offset_rad'], config.replay_periods, curves=True)
+        replays = mp.replay_report(sim, windows, config.latency, config.replay_periods, progress)
     pairs = []
     for tr in trs:
         pairs.append((tr, simulate_transition(sim, tr, config.latency, curve=tr.primitive in ('E', 'F'))))
@@ -403,7 +415,7 @@ def fidelity_report(params: FrogParameters | None = None, config: FidelityConfig
     return FidelityReport(params=params.as_dict(), config=asdict(config), data=info, primitives=prim,
                           summary=summary, curves=curves, kick_from_rest=kick, repeated=rep, coasting=coast,
                           speeds=speeds,
-                          pairs=[{'real': a.as_dict(), 'sim': b.as_dict()} for a, b in pairs])
+                          pairs=[{'real': a.as_dict(), 'sim': b.as_dict()} for a, b in pairs], replays=replays)
 
 
 # ------------------------------------------------------------------ targets and table
@@ -420,6 +432,19 @@ def targets(rep: FidelityReport) -> list[tuple[str, str, bool | None]]:
         if row:
             r = row['dy']['ratio']
             out.append((f'{p} sideways: right sign, within +-35 %', f'ratio {r:.2f}', bool(0.65 <= r <= 1.35)))
+    if rep.replays:
+        m = rep.replays['pooled']
+        for n in range(1, 5):
+            if n in m:
+                r = m[n]['heading_ratio']
+                out.append((f'{n}-period replays: heading ratio sim/real within 0.85-1.15', f'{r:.2f}',
+                            bool(0.85 <= r <= 1.15)))
+        if 3 in m:
+            e = np.degrees(m[3]['rms_heading_error'])
+            out.append(('3-period replays: RMS heading error <= 8 deg', f'{e:.1f} deg', bool(e <= 8.0)))
+    r = rep.repeated['steady_yaw_rate']
+    out.append(('E every period from rest: steady yaw rate 13.5 deg/s +-25 %', f'{abs(np.degrees(r)):.1f} deg/s',
+                bool(abs(abs(np.degrees(r)) - 13.5) <= 0.25 * 13.5)))
     k = rep.kick_from_rest
     out.append(('yaw rate 1.5 s after one kick from rest <= 30 % of peak', f'{100 * k["ratio_at_1p5s"]:.0f} %',
                 bool(abs(k['ratio_at_1p5s']) <= 0.30)))
@@ -494,7 +519,10 @@ def format_table(rep: FidelityReport) -> str:
             rows = [r for r in sp['experiments'] if r['egain_vol_pct'] == e]
             lines.append(f'    {e:g} %: ' + ', '.join(
                 f'{r["frequency_hz"]:g} {1e3 * r["measured"]:.0f}/{1e3 * r["simulated"]:.0f}' for r in rows))
-    lines += ['', 'targets (issue 11):']
+    if rep.replays:
+        from .multi_period import format_replay_table
+        lines += ['', format_replay_table(rep.replays)]
+    lines += ['', 'targets (issues 11, 18):']
     for name, val, ok in targets(rep):
         lines.append(f'  [{"ok" if ok else "--"}] {name}: {val}')
     return '\n'.join(lines)
@@ -576,4 +604,7 @@ def plot_report(rep: FidelityReport, out: Path) -> list[Path]:
         files.append(out / 'speeds.png')
         fig.savefig(files[-1], dpi=110)
         plt.close(fig)
+    if rep.replays:
+        from .multi_period import plot_replays
+        files += plot_replays(rep.replays, out)
     return files

@@ -13,6 +13,7 @@ import numpy as np
 
 EPILOG = """examples:
   frog-sweep calibrate --out runs/calibration                 # joint: hardware transitions + all speeds
+  frog-sweep calibrate-replays --out runs/cal_replays         # issue 18: N-period replays, CV, speeds
   frog-sweep calibrate --out runs/cal_quick --refine-iterations 10
   frog-sweep calibrate --body-drag-only --out runs/cbn        # the paper's C_bn in 0.8..2.0 only
   frog-sweep calibrate --body-drag-only --out runs/cal --candidates 0.6 0.8 1.0 --workers 2
@@ -291,6 +292,79 @@ def plot_sweep(rows, png) -> None:
     plt.close(fig)
 
 
+def cmd_calibrate_replays(args) -> int:
+    """Joint calibration on N-period replays (issue 18): grid, Nelder-Mead, leave-runs-out CV."""
+    from tqdm import tqdm
+
+    from frog_sim import multi_period as mp
+    from frog_sim import replay_calibration as rc
+    from frog_sim.core.actuation import find_data_file
+    from frog_sim.core.hardware_runs import HARDWARE_RUNS, estimate_tag_offset, read_hardware_runs
+    from frog_sim.core.model_parameters import FrogParameters
+    from frog_sim.fidelity import read_experiment_speeds
+    from frog_sim.studies import measured_speeds
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0, c0 = time.perf_counter(), time.process_time()
+    folder = find_data_file("hardware_runs/line1.csv").parent
+    logs = read_hardware_runs(folder, HARDWARE_RUNS)
+    offset, _, _ = estimate_tag_offset([logs["line1"], logs["line2"]])
+    windows = mp.real_windows(logs, offset, max(rc.N_RATIO))
+    cal_speeds = [(f, float(np.nanmean(list(v.values())))) for f, v in sorted(measured_speeds().items())]
+    exp_speeds = [(e, f, v) for e, f, _, v in read_experiment_speeds()]
+    # the issue-11 model with zero lumped damping is the starting point ("before")
+    base = FrogParameters()
+    obj = rc.ReplayObjective(windows, cal_speeds, exp_speeds, base, latency=args.latency,
+                             cache_file=out / "evaluations.jsonl")
+    grid = rc.grid_points(rc.DEFAULT_GRID)
+    before = {k: 0.0 if "damping" in k else getattr(base, k) for k in rc.DEFAULT_GRID}
+    bar = tqdm(total=len(grid) + 1 + args.refine_iterations, desc="calibration", unit="eval")
+
+    def progress(ev):
+        bar.update(1)
+        bar.set_postfix_str(f"cost {obj.cost(ev):.2f}")
+    ev_before = obj.evaluate([before], progress=progress)[0]
+    evs = obj.evaluate(grid, workers=args.workers or 2, progress=progress)
+    grid_best = min(evs, key=obj.cost)
+    scale = {n: float(np.ptp(v)) / max(len(v) - 1, 1) for n, v in rc.DEFAULT_GRID.items()}
+    best = rc.refine(obj, grid_best.values, scale, iterations=args.refine_iterations, progress=progress) \
+        if args.refine_iterations > 0 else grid_best
+    if obj.cost(grid_best) < obj.cost(best):
+        best = grid_best
+    bar.close()
+    cv = rc.cross_validate(obj, evs)
+    deg = np.degrees(1.0)
+
+    def row(label, ev, runs=None):
+        m = obj.metrics(ev, runs)
+        r = m["replays"]
+        p = m["primitives"]
+        return (f"{label:24s} " + " ".join(f"{r[n]['heading_ratio']:5.2f}" for n in rc.N_RATIO if n in r)
+                + f" | {deg * r[3]['rms_heading_error']:5.1f} | "
+                + " ".join(f"{p[q]['dheading']:4.2f}" for q in "CDEF" if q in p)
+                + f" | {p['E']['dy']:4.2f} {p['F']['dy']:4.2f} | {p['B']['dx']:4.2f} | {abs(m['kick_ratio']):4.2f} | "
+                + f"{deg * abs(m['repeated_yaw_rate']):5.1f} | {1e3 * m['speed_rms_experiments']:4.1f} "
+                + f"{1e3 * m['speed_rms_calibration']:4.1f} | {obj.cost(ev, runs):7.2f}")
+    print(f"\ncalibrated: {_fmt_values(best.values)}")
+    print(f"\n{'':24s} heading ratio N=1..4  | RMS dh3 | dh C D E F ratio | dy E F | dx B | kick | E rep | "
+          f"speed RMS exp cal | cost")
+    print(row("before (all runs)", ev_before))
+    print(row("calibrated (all runs)", best))
+    for f in cv:
+        chosen = obj.evaluate([f["chosen"]])[0]
+        print(row(f"CV held out {'+'.join(f['held_out'])}", chosen, f["held_out"]))
+        print(f"{'':26s}chosen on {'+'.join(f['train'])}: {_fmt_values(f['chosen'])}")
+    result = {"tag_offset_deg": float(np.degrees(offset)), "grid": rc.DEFAULT_GRID, "calibrated": best.values,
+              "before": before, "terms": obj.terms(best), "metrics": rc._jsonable(obj.metrics(best)),
+              "terms_before": obj.terms(ev_before), "metrics_before": rc._jsonable(obj.metrics(ev_before)),
+              "cross_validation": rc._jsonable(cv), "evaluations": len(obj.cache),
+              "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
+    (out / "calibration_replays.json").write_text(json.dumps(_meta(args, {"result": result}), indent=1, default=float))
+    print(f"\n{len(obj.cache)} evaluations, {time.perf_counter() - t0:.0f} s wall; "
+          f"wrote {out / 'calibration_replays.json'}")
+    return 0
+
+
 def build_parser():
     ap = argparse.ArgumentParser(prog="frog-sweep", description=__doc__, epilog=EPILOG,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -317,6 +391,15 @@ def build_parser():
                    help="gait cycles per speed simulation during the search (default 6)")
     c.add_argument("--latency", type=float, default=0.10, help="decision -> firing [s] (default 0.10)")
     c.set_defaults(func=cmd_calibrate_any)
+    r = sub.add_parser("calibrate-replays", help="joint calibration on N-period hardware replays and all speeds, "
+                                                 "with leave-runs-out cross-validation (issue 18)",
+                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    r.add_argument("--out", type=Path, required=True, help="run folder (evaluations.jsonl resumes a rerun)")
+    r.add_argument("--workers", type=int, default=2, help="local processes for the grid (default 2)")
+    r.add_argument("--refine-iterations", type=int, default=10,
+                   help="Nelder-Mead evaluations after the grid (default 10)")
+    r.add_argument("--latency", type=float, default=0.10, help="decision -> firing [s] (default 0.10)")
+    r.set_defaults(func=cmd_calibrate_replays)
     s = sub.add_parser("sweep", help="speed and COT over EGaIn x frequency x phase")
     common(s)
     s.add_argument("--phases", type=float, nargs="+", default=None, help="default 0.0..0.9")

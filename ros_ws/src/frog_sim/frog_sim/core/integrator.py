@@ -8,6 +8,9 @@ Jacobian (eq. 8)::
 
     J = M / h^2 + d2E/dx2 - df_d/dx - (1/h) df_d/dv
 
+``f_ext`` holds the constant applied force plus the lumped rigid-body damping of
+:mod:`~frog_sim.core.body_damping`, evaluated at the start of each step (explicit).
+
 Newton (eq. 7) iterates ``x <- x - J \\ F`` from the predictor ``x_k + h v_k`` until
 ``max|F| <= force_tolerance`` or ``max|dx| <= position_tolerance``; at most
 ``max_iterations``. A step that does not converge (or produces a non-finite value) is
@@ -28,6 +31,7 @@ import scipy.sparse.linalg as spla
 from numba import njit
 
 from .actuation import ActuatorArrays, apply_actuation
+from .body_damping import body_damping_force
 from .elastic_energy import bend_element, stretch_element
 from .fluid import drag_element, drag_prefactors
 from .linear_algebra import build_jacobian_pattern, sparse_lu_factor, sparse_lu_pack, sparse_lu_substitute
@@ -213,11 +217,15 @@ def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
                max_iter, act_profile, act_young, act_times, act_offsets, act_bend, act_bend_limb,
                act_bend_sign, act_bend_i, act_edge, act_edge_limb, act_edge_area, act_root,
                act_root_limb, act_root_sign, act_root_base, act_root_half, act_root_len,
-               act_root_i, lu, rhs, resid, x_prev, v_prev, lu_state, reuse, v_old, packed, refresh_ratio=0.5):
+               act_root_i, lu, rhs, resid, x_prev, v_prev, lu_state, reuse, v_old, packed, bd_mass, bd_ref,
+               bd_coef, f_tot, f_damp, refresh_ratio=0.5):
     """Advance ``n_steps`` steps of size ``h`` in place (x, v), actuation included.
 
     The Newton guess extrapolates the velocity linearly, ``x_k + h (2 v_k - v_{k-1})``
     (``v_old`` holds v_{k-1} and is updated), which saves about one iteration per step.
+
+    ``bd_coef`` = (X_u, Y_v, N_r) of the lumped body damping (all 0: none); ``f_tot``
+    and ``f_damp`` are work arrays (2N,).
 
     Returns (steps done, status of the failing step or 0, total Newton iterations,
     last residual norm). On failure x, v hold the state before the failing step.
@@ -225,12 +233,19 @@ def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
     n = x.shape[0]
     total_iter = 0
     norm = 0.0
+    damp = bd_coef[0] != 0.0 or bd_coef[1] != 0.0 or bd_coef[2] != 0.0
+    for d in range(n):
+        f_tot[d] = f_ext[d]
     for k in range(n_steps):
         t_new = t + (k + 1) * h
         apply_actuation(t_new, act_profile, act_young, act_times, act_offsets, act_bend,
                         act_bend_limb, act_bend_sign, act_bend_i, act_edge, act_edge_limb,
                         act_edge_area, act_root, act_root_limb, act_root_sign, act_root_base,
                         act_root_half, act_root_len, act_root_i, kappa0, ei, ea)
+        if damp:
+            body_damping_force(x, v, bd_mass, bd_ref, bd_coef[0], bd_coef[1], bd_coef[2], f_damp)
+            for d in range(n):
+                f_tot[d] = f_ext[d] + (0.0 if fixed[d] else f_damp[d])
         for d in range(n):
             x_prev[d] = x[d]
             v_prev[d] = v[d]
@@ -238,7 +253,7 @@ def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei,
                 x[d] = x[d] + h * (2.0 * v[d] - v_old[d])
         status, iters, norm = newton_direct(
             x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0, cn, ct,
-            f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, True, force_tol, pos_tol,
+            f_tot, fixed, edge_map, bend_map, diag_map, perm, plan, True, force_tol, pos_tol,
             max_iter, lu, rhs, resid, lu_state, reuse, packed, refresh_ratio)
         total_iter += iters
         if status != 0:
@@ -292,6 +307,12 @@ class ImplicitEulerIntegrator:
         Keep the LU factors across Newton iterations and steps while the residual
         contracts fast (simplified Newton); re-factorise otherwise. Same converged
         result (residual test), fewer factorisations.
+    body_damping : (float, float, float)
+        Linear damping (X_u [N s/m], Y_v [N s/m], N_r [N m s/rad]) lumped on the rigid
+        body (:mod:`~frog_sim.core.body_damping`); zeros: none.
+    reference : ndarray, shape (N, 2), optional
+        Reference pose centred at its COM (the body axes of surge and sway); default: the
+        network's positions about their centre of mass.
 
     Attributes
     ----------
@@ -305,7 +326,8 @@ class ImplicitEulerIntegrator:
 
     def __init__(self, network, mass, *, fluid_density=1000.0, actuator=None, fixed_dofs=(),
                  solver='direct', force_tolerance=1e-9, position_tolerance=1e-11,
-                 max_iterations=25, max_halvings=8, reuse_jacobian=True):
+                 max_iterations=25, max_halvings=8, reuse_jacobian=True, body_damping=(0.0, 0.0, 0.0),
+                 reference=None):
         if solver not in ('direct', 'superlu'):
             raise ValueError(f"solver = {solver!r}, expected 'direct' or 'superlu'")
         mass = np.asarray(mass, dtype=float)
@@ -352,6 +374,18 @@ class ImplicitEulerIntegrator:
         self.ei = network.bend_stiffness.copy()
         self.ea = network.edge_stretching_stiffness.copy()
         self.external_force = np.zeros(n)
+        coef = np.asarray(body_damping, dtype=float)
+        if coef.shape != (3,) or not np.all(np.isfinite(coef)) or np.any(coef < 0):
+            raise ValueError(f'body_damping = {body_damping!r}, expected three finite values >= 0')
+        self.body_damping = coef
+        pos = network.positions.astype(float)
+        if reference is None:
+            reference = pos - mass @ pos / mass.sum()
+        self.reference = np.ascontiguousarray(reference, dtype=float)
+        if self.reference.shape != (network.n_nodes, 2):
+            raise ValueError(f'reference has shape {self.reference.shape}, expected ({network.n_nodes}, 2)')
+        self._f_tot = np.zeros(n)
+        self._f_damp = np.zeros(n)
         self.x = network.positions.reshape(-1).astype(float).copy()
         self.v = np.zeros(n)
         self._v_old = np.zeros(n)      # velocity of the previous step (predictor)
@@ -397,19 +431,27 @@ class ImplicitEulerIntegrator:
         """Set natural curvature and stiffness of actuated elements for time ``t``."""
         apply_actuation(float(t), *self.actuator.as_tuple(), self.kappa0, self.ei, self.ea)
 
-    def _assemble(self, x, x_prev, v_prev, h, dynamic, data, edge_map, bend_map, diag_map):
+    def applied_force(self) -> np.ndarray:
+        """Force of the next step, held over it [N]: ``external_force`` plus the body damping
+        at the current state."""
+        if not np.any(self.body_damping):
+            return self.external_force
+        body_damping_force(self.x, self.v, self.mass, self.reference, *self.body_damping, self._f_damp)
+        return self.external_force + np.where(self.fixed, 0.0, self._f_damp)
+
+    def _assemble(self, x, x_prev, v_prev, h, dynamic, data, edge_map, bend_map, diag_map, f_ext=None):
         return assemble_system(x, x_prev, v_prev, h, self.mass2, self.network.edges,
                                self.network.edge_rest_length, self.ea, self.network.bends,
                                self.network.bend_length, self.ei, self.kappa0, self.cn, self.ct,
-                               self.external_force, self.fixed, edge_map, bend_map, diag_map,
-                               dynamic, data, self._resid)
+                               self.external_force if f_ext is None else f_ext, self.fixed, edge_map,
+                               bend_map, diag_map, dynamic, data, self._resid)
 
-    def _newton_sparse(self, x, x_prev, v_prev, h, dynamic):
+    def _newton_sparse(self, x, x_prev, v_prev, h, dynamic, f_ext):
         """Newton with SuperLU on the CSR Jacobian (robust path)."""
         pat = self.pattern
         norm = np.inf
         for it in range(self.max_iterations):
-            norm = self._assemble(x, x_prev, v_prev, h, dynamic, self._csr_data, *self._maps_csr)
+            norm = self._assemble(x, x_prev, v_prev, h, dynamic, self._csr_data, *self._maps_csr, f_ext=f_ext)
             if not np.isfinite(norm):
                 return STATUS_NOT_FINITE, it, norm
             if norm <= self.force_tolerance:
@@ -425,8 +467,9 @@ class ImplicitEulerIntegrator:
                 return STATUS_OK, it + 1, norm
         return STATUS_MAX_ITER, self.max_iterations, norm
 
-    def _newton(self, x, x_prev, v_prev, h, dynamic, solver):
+    def _newton(self, x, x_prev, v_prev, h, dynamic, solver, f_ext=None):
         pat = self.pattern
+        f_ext = self.external_force if f_ext is None else f_ext
         if solver == 'direct':
             reuse = self.reuse_jacobian and dynamic
             if not reuse or self._lu_h != h:
@@ -436,23 +479,24 @@ class ImplicitEulerIntegrator:
                 x, x_prev, v_prev, h, self.mass2, self.network.edges,
                 self.network.edge_rest_length, self.ea, self.network.bends,
                 self.network.bend_length, self.ei, self.kappa0, self.cn, self.ct,
-                self.external_force, self.fixed, *self._maps_lu, pat.lu_plan.perm, self._plan,
+                f_ext, self.fixed, *self._maps_lu, pat.lu_plan.perm, self._plan,
                 dynamic, self.force_tolerance,
                 self.position_tolerance, self.max_iterations, self._lu, self._rhs, self._resid,
                 self._lu_state, reuse, self._packed, self.refresh_ratio)
             if status != STATUS_BAD_PIVOT:
                 return status, iters, norm
             self.stats.sparse_fallbacks += 1
-        return self._newton_sparse(x, x_prev, v_prev, h, dynamic)
+        return self._newton_sparse(x, x_prev, v_prev, h, dynamic, f_ext)
 
     def _single_step(self, h, solver):
         """One backward-Euler step of size h from (x, v, time); returns (status, iters, norm)."""
         t_new = self.time + h
         self.update_actuation(t_new)
+        f_ext = self.applied_force()
         x_prev = self.x.copy()
         v_prev = self.v.copy()
         x = x_prev + np.where(self.fixed, 0.0, h * (2.0 * v_prev - self._v_old))
-        status, iters, norm = self._newton(x, x_prev, v_prev, h, True, solver)
+        status, iters, norm = self._newton(x, x_prev, v_prev, h, True, solver, f_ext)
         if status == STATUS_OK:
             self.x = x
             self.v = np.where(self.fixed, 0.0, (x - x_prev) / h)
@@ -537,7 +581,8 @@ class ImplicitEulerIntegrator:
                 self._plan, self.force_tolerance,
                 self.position_tolerance, self.max_iterations, *act, self._lu, self._rhs,
                 self._resid, self._x_prev, self._v_prev, self._lu_state, self.reuse_jacobian,
-                self._v_old, self._packed, self.refresh_ratio)
+                self._v_old, self._packed, self.mass, self.reference, self.body_damping, self._f_tot,
+                self._f_damp, self.refresh_ratio)
             self.stats.newton_iterations += iters
             self.stats.last_residual = norm
             self.stats.steps += done

@@ -119,6 +119,13 @@ class FrogParameters:
                                                               'unit': '-'})
     # front limbs' root direction relative to the rear limbs' (0: all four alike)
     front_root_angle_offset_deg: float = field(default=32.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
+    # --- linear damping lumped on the rigid body (issue 18; core/body_damping.py) ---
+    # X_u: surge
+    surge_damping_linear: float = field(default=0.0, metadata={'range': (0.0, 1.0), 'unit': 'N s/m'})
+    # Y_v: sway
+    sway_damping_linear: float = field(default=0.0, metadata={'range': (0.0, 1.0), 'unit': 'N s/m'})
+    # N_r: yaw
+    yaw_damping_linear: float = field(default=0.0, metadata={'range': (0.0, 0.05), 'unit': 'N m s/rad'})
 
     def replace(self, **changes) -> 'FrogParameters':
         """Return a copy with some fields changed (validated)."""
@@ -144,7 +151,8 @@ class FrogParameters:
             if not np.isfinite(value) or value <= 0:
                 raise ValueError(f'{name} = {value!r} must be a finite positive number')
         for name in ['limb_drag_normal', 'limb_drag_tangent', 'body_drag_normal',
-                     'body_drag_tangent', 'added_mass_coefficient']:
+                     'body_drag_tangent', 'added_mass_coefficient', 'surge_damping_linear',
+                     'sway_damping_linear', 'yaw_damping_linear']:
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f'{name} = {value!r} must be finite and >= 0')
@@ -256,6 +264,10 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     'front_root_angle_offset_deg': ('deg', 'joint calibration (issue 11): front limbs turned by this much toward '
                                     'the front relative to limb_root_angle_deg: 32 -> front limbs 58 deg aft of '
                                     'lateral (Fig. 2b gives no angle for either pair)'),
+    'surge_damping_linear': ('N s/m', 'X_u of the linear damping lumped on the rigid body (Fossen D_L; radiation '
+                             'damping, meniscus, limb recovery strokes; issue 18, core/body_damping.py)'),
+    'sway_damping_linear': ('N s/m', 'Y_v of the same linear damping (sideways)'),
+    'yaw_damping_linear': ('N m s/rad', 'N_r of the same linear damping (yaw): what stops the turn after a kick'),
     'pulse_duration': ('s', 'DESIGN.md hardware pulse 80 ms (paper characterisation 70 ms)'),
     'primitive_period': ('s', 'DESIGN.md: one primitive per 1.5 s'),
     'limb_curl_direction': ('-', "'forward' = the relaxed curl turns a lateral limb toward the front, i.e. "

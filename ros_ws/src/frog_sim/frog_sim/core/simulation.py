@@ -141,7 +141,10 @@ class FrogSimulation:
         self._apply_limb_strength()
         self.integrator = ImplicitEulerIntegrator(
             self.model.network, self.model.mass, fluid_density=self.params.fluid_density,
-            actuator=self._actuator, solver=self._solver, force_tolerance=self._force_tolerance)
+            actuator=self._actuator, solver=self._solver, force_tolerance=self._force_tolerance,
+            body_damping=(self.params.surge_damping_linear, self.params.sway_damping_linear,
+                          self.params.yaw_damping_linear),
+            reference=self.model.reference_pose)
         self._schedule = ActivationSchedule.empty()
         self._gait = None
         self._horizon = -np.inf

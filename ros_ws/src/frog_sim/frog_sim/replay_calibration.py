@@ -1,0 +1,236 @@
+"""Joint calibration on N-period replays, with leave-runs-out cross-validation (issue 18).
+
+Objective
+---------
+As :mod:`frog_sim.calibration` (each term a squared error over its tolerance, 1 at the
+edge of its target), but the hardware terms come from the open-loop replays of
+:mod:`frog_sim.multi_period` over N = 1..4 periods instead of one period:
+
+* ``ratio_N``: the pooled heading ratio sim/real after N periods, ``((r - 1) / 0.15)^2``;
+* ``rms_heading_3``: the RMS heading error after 3 periods, ``(e / 8 deg)^2``;
+* the single-period targets: C/D/E/F heading (+-25 %), E/F side-slip (+-35 %), B
+  forward (+-15 %), from the N = 1 windows (per primitive, means);
+* the yaw left 1.5 s after one kick from rest, ``(max(0, q - 0.3) / 0.3)^2``, and the
+  steady yaw rate of E every period from rest, ``((w - 13.5) / 3.4 deg/s)^2``;
+* the speeds: ``(RMS / 8 mm/s)^2`` over every experiment speed and ``(RMS / 5 mm/s)^2``
+  over the 10 % calibration runs (phase 0.5).
+
+Every evaluation keeps the simulated end poses of every window, so the hardware terms
+can be scored on any subset of runs afterwards: a **leave-runs-out cross-validation**
+picks, for each fold, the grid point best on the other runs and scores it on the fold's
+held-out runs. The speeds do not depend on the runs and enter every fold.
+"""
+from __future__ import annotations
+
+import itertools
+import json
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import multi_period as mp
+from .core.actuation import ActuationLibrary
+from .core.model_parameters import FrogParameters, parameter_range
+from .core.simulation import DEFAULT_TIME_STEP, FrogSimulation
+
+#: The free parameters of issue 18 and their grid: the lumped yaw and surge damping, and
+#: the limbs' normal drag coefficient (a flat strip: 1.2-2 against the cylinder's 1).
+DEFAULT_GRID = {'yaw_damping_linear': (0.0003, 0.0004, 0.0005),
+                'limb_drag_normal': (1.5, 1.8, 2.1),
+                'surge_damping_linear': (0.02, 0.04)}
+#: Folds of the cross-validation: each holds out one line and one or two sines.
+DEFAULT_FOLDS = (('line1', 'sin1'), ('line2', 'sin2'), ('sin3', 'sin4'))
+N_RATIO = (1, 2, 3, 4)
+REPEATED_TARGET = np.radians(13.5)
+
+
+@dataclass
+class ReplayEvaluation:
+    """One simulated parameter point: window end poses, kick, repetition, speeds."""
+
+    values: dict
+    windows: list              # per window: list of (dx, dy, dh) per period end
+    kick_ratio: float
+    repeated_yaw_rate: float
+    speeds: dict = field(default_factory=dict)
+
+
+def _simulate(args) -> ReplayEvaluation:
+    values, base, windows, latency, time_step, speed_points, cycles = args
+    from .fidelity import kick_from_rest, repeated_kicks, steady_speed
+    params = base.replace(**values)
+    library = ActuationLibrary.load()
+    sim = FrogSimulation(params, time_step=time_step, library=library)
+    ends = [mp.simulate_window(sim, w, latency) for w in windows]
+    kick = kick_from_rest(sim, 'E', 2.0)['ratio_at_1p5s']
+    rep = repeated_kicks(sim, 'E', float(np.median([w.period for w in windows])), 8)['steady_yaw_rate']
+    speeds = {}
+    skip = max(2, int(round(3 * cycles / 8)))
+    for e, f in speed_points:
+        speeds[f'{e:g}@{f:g}'] = steady_speed(params, e, f, library, time_step, cycles, skip)
+    return ReplayEvaluation(dict(values), ends, float(kick), float(rep), speeds)
+
+
+class ReplayObjective:
+    """Evaluations of parameter points against the replay windows and the speeds."""
+
+    def __init__(self, windows, calibration_speeds, experiment_speeds, base: FrogParameters | None = None,
+                 latency: float = 0.10, time_step: float = DEFAULT_TIME_STEP, speed_cycles: int = 8,
+                 cache_file=None):
+        self.windows = list(windows)
+        self.calibration_speeds = [(10.0, round(f, 1), v) for f, v in calibration_speeds]
+        self.experiment_speeds = [(e, round(f, 1), v) for e, f, v in experiment_speeds]
+        self.base = base or FrogParameters()
+        self.latency = latency
+        self.time_step = time_step
+        self.speed_cycles = speed_cycles
+        self.points = sorted({(e, f) for e, f, _ in self.calibration_speeds + self.experiment_speeds})
+        self.cache: dict[str, ReplayEvaluation] = {}
+        self.cache_file = Path(cache_file) if cache_file else None
+        if self.cache_file and self.cache_file.is_file():
+            for line in self.cache_file.read_text().splitlines():
+                try:
+                    row = json.loads(line)
+                except ValueError:
+                    continue     # a line cut by an interrupted run
+                ev = ReplayEvaluation(**row)
+                self.cache[self._key(ev.values)] = ev
+
+    @staticmethod
+    def _key(values: dict) -> str:
+        return json.dumps({k: round(float(v), 7) for k, v in sorted(values.items())})
+
+    def evaluate(self, points: list[dict], workers: int = 1, progress=None) -> list[ReplayEvaluation]:
+        """Evaluate (or take from the cache) each point; ``workers`` processes."""
+        todo = [p for p in points if self._key(p) not in self.cache]
+        args = [(p, self.base, self.windows, self.latency, self.time_step, self.points, self.speed_cycles)
+                for p in todo]
+        results = []
+        if workers > 1 and len(args) > 1:
+            with ProcessPoolExecutor(workers) as pool:
+                for ev in pool.map(_simulate, args):
+                    results.append(ev)
+                    self._store(ev)
+                    if progress:
+                        progress(ev)
+        else:
+            for a in args:
+                ev = _simulate(a)
+                results.append(ev)
+                self._store(ev)
+                if progress:
+                    progress(ev)
+        return [self.cache[self._key(p)] for p in points]
+
+    def _store(self, ev: ReplayEvaluation) -> None:
+        self.cache[self._key(ev.values)] = ev
+        if self.cache_file:
+            with open(self.cache_file, 'a') as fh:
+                fh.write(json.dumps({'values': ev.values, 'windows': ev.windows, 'kick_ratio': ev.kick_ratio,
+                                     'repeated_yaw_rate': ev.repeated_yaw_rate, 'speeds': ev.speeds}) + '\n')
+
+    # -- scoring ------------------------------------------------------------------------
+    def metrics(self, ev: ReplayEvaluation, runs=None) -> dict:
+        """Replay metrics (per N) and single-period ratios over ``runs`` (default: all)."""
+        wins = []
+        for w, ends in zip(self.windows, ev.windows):
+            if runs is None or w.run in runs:
+                w2 = mp.ReplayWindow(**{**w.__dict__, 'sim': ends, 'curve': {}})
+                wins.append(w2)
+        out = {'replays': mp.window_metrics(wins, max(N_RATIO)), 'primitives': {}}
+        for p in 'BCDEF':
+            sel = [w for w in wins if w.primitives[0] == p]
+            if sel:
+                r = np.mean([w.real[0] for w in sel], axis=0)
+                s = np.mean([w.sim[0] for w in sel], axis=0)
+                out['primitives'][p] = {'dx': s[0] / r[0], 'dy': s[1] / r[1], 'dheading': s[2] / r[2], 'n': len(sel)}
+        sp = ev.speeds
+
+        def rms(rows):
+            err = [sp[f'{e:g}@{f:g}'] - v for e, f, v in rows if np.isfinite(sp.get(f'{e:g}@{f:g}', np.nan))]
+            return float(np.sqrt(np.mean(np.square(err)))) if err else float('nan')
+        out['speed_rms_experiments'] = rms(self.experiment_speeds)
+        out['speed_rms_calibration'] = rms(self.calibration_speeds)
+        out['kick_ratio'] = ev.kick_ratio
+        out['repeated_yaw_rate'] = ev.repeated_yaw_rate
+        return out
+
+    def terms(self, ev: ReplayEvaluation, runs=None) -> dict:
+        """Squared errors over tolerances (module doc)."""
+        m = self.metrics(ev, runs)
+        t = {}
+        for n in N_RATIO:
+            if n in m['replays']:
+                t[f'ratio_{n}'] = ((m['replays'][n]['heading_ratio'] - 1.0) / 0.15) ** 2
+        if 3 in m['replays']:
+            t['rms_heading_3'] = (m['replays'][3]['rms_heading_error'] / np.radians(8.0)) ** 2
+        prim = m['primitives']
+        for p in 'CDEF':
+            if p in prim:
+                t[f'dheading_{p}'] = ((prim[p]['dheading'] - 1.0) / 0.25) ** 2
+        for p in 'EF':
+            if p in prim:
+                t[f'dy_{p}'] = ((prim[p]['dy'] - 1.0) / 0.35) ** 2
+        if 'B' in prim:
+            t['dx_B'] = ((prim['B']['dx'] - 1.0) / 0.15) ** 2
+        t['yaw_decay'] = (max(0.0, abs(m['kick_ratio']) - 0.3) / 0.3) ** 2
+        t['repeated_E'] = ((abs(m['repeated_yaw_rate']) - REPEATED_TARGET) / (0.25 * REPEATED_TARGET)) ** 2
+        if np.isfinite(m['speed_rms_experiments']):
+            t['speed_experiments'] = (m['speed_rms_experiments'] / 0.008) ** 2
+        if np.isfinite(m['speed_rms_calibration']):
+            t['speed_calibration'] = (m['speed_rms_calibration'] / 0.005) ** 2
+        return t
+
+    def cost(self, ev: ReplayEvaluation, runs=None) -> float:
+        return float(sum(self.terms(ev, runs).values()))
+
+
+def grid_points(grid: dict) -> list[dict]:
+    names = list(grid)
+    return [dict(zip(names, combo)) for combo in itertools.product(*(grid[n] for n in names))]
+
+
+def refine(objective: ReplayObjective, start: dict, scale: dict, runs=None, iterations: int = 12, progress=None):
+    """Nelder-Mead from ``start`` (each parameter scaled by ``scale``, clipped to its range)."""
+    from scipy.optimize import minimize
+    names = list(start)
+    s = np.array([scale[n] for n in names])
+    bounds = [parameter_range(n) for n in names]
+    x0 = np.array([start[n] for n in names]) / s
+    seen = []
+
+    def f(z):
+        vals = {n: float(np.clip(v * sc, *b)) for n, v, sc, b in zip(names, z, s, bounds)}
+        ev = objective.evaluate([vals], progress=progress)[0]
+        seen.append(ev)
+        return objective.cost(ev, runs)
+    simplex = [x0] + [x0 + 0.5 * np.eye(len(names))[i] for i in range(len(names))]
+    minimize(f, x0, method='Nelder-Mead', options={'maxfev': iterations, 'initial_simplex': np.array(simplex),
+                                                   'xatol': 0.05, 'fatol': 0.02})
+    return min(seen, key=lambda e: objective.cost(e, runs))
+
+
+def cross_validate(objective: ReplayObjective, candidates, folds=DEFAULT_FOLDS) -> list[dict]:
+    """Per fold: the candidate best on the other runs, its cost there and on the held-out runs."""
+    runs = sorted({w.run for w in objective.windows})
+    out = []
+    for held in folds:
+        train = [r for r in runs if r not in held]
+        best = min(candidates, key=lambda e: objective.cost(e, train))
+        out.append({'held_out': list(held), 'train': train, 'chosen': best.values,
+                    'train_cost': objective.cost(best, train), 'held_out_cost': objective.cost(best, held),
+                    'held_out_terms': objective.terms(best, held),
+                    'held_out_metrics': _jsonable(objective.metrics(best, held))})
+    return out
+
+
+def _jsonable(o):
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    return o
