@@ -84,7 +84,8 @@ def main() -> None:
         sim = fresh_sim()
         integ = sim.integrator
         ref = NumpyReferenceStepper(integ.network, integ.mass, actuator=integ.actuator,
-                                    force_tolerance=integ.force_tolerance)
+                                    force_tolerance=integ.force_tolerance, body_damping=integ.body_damping,
+                                    reference=integ.reference)
         ref.x[:] = integ.x
         t0 = time.perf_counter()
         c0 = time.process_time()

@@ -72,9 +72,19 @@ def repo_root() -> Path:
 
 
 def ensure_library(path: Path, states: int, horizon: float = 3.0) -> Path:
-    """Generate the default motion library on first use (frog-library, with progress)."""
+    """Generate the default motion library on first use (frog-library, with progress).
+
+    A library made with another robot model than today's defaults (an older calibration)
+    is regenerated: the planner would otherwise plan with transitions the twin's frog no
+    longer has.
+    """
     if path.exists():
-        return path
+        stale = _library_model_differs(path)
+        if not stale:
+            return path
+        print(f"the default motion library {path} was made with another frog model ({stale}); regenerating",
+              flush=True)
+        path.replace(path.with_suffix(".old.npz"))
     print(f"generating the default motion library on first use: {states} states x 9 primitives -> {path}",
           flush=True)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -85,6 +95,20 @@ def ensure_library(path: Path, states: int, horizon: float = 3.0) -> Path:
     if proc.proc.returncode != 0 or not path.exists():
         raise RuntimeError(f"library generation failed:\n{proc.log_text()[-3000:]}")
     return path
+
+
+def _library_model_differs(path: Path) -> str:
+    """'' if the library's robot model is today's default, else the first differing parameter."""
+    from frog_sim.core.model_parameters import FrogParameters
+    from frog_sim.core.motion_library import load_library
+    try:
+        robot = load_library(path)["metadata"].get("robot", {})
+    except Exception as exc:      # unreadable: regenerate rather than fail the run
+        return f"unreadable: {exc}"
+    for name, value in FrogParameters().as_dict().items():
+        if robot.get(name) != value:
+            return f"{name} = {robot.get(name)!r}, now {value!r}"
+    return ""
 
 
 class PlannerWatch:

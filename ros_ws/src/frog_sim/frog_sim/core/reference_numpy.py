@@ -33,11 +33,19 @@ class NumpyReferenceStepper:
     ----------
     network, mass, fluid_density, actuator, force_tolerance, position_tolerance, max_iterations
         As :class:`~frog_sim.core.integrator.ImplicitEulerIntegrator`.
+    body_damping, reference
+        As there: the lumped linear damping, held over each step from its start (written
+        again here in vectorised numpy as an independent check of the numba kernel).
     """
 
     def __init__(self, network, mass, *, fluid_density=1000.0, actuator=None,
-                 force_tolerance=1e-8, position_tolerance=1e-11, max_iterations=25):
+                 force_tolerance=1e-8, position_tolerance=1e-11, max_iterations=25,
+                 body_damping=(0.0, 0.0, 0.0), reference=None):
         self.net = network
+        self.mass = np.asarray(mass, dtype=float)
+        self.body_damping = tuple(float(c) for c in body_damping)
+        pos = network.positions.astype(float)
+        self.reference = (pos - self.mass @ pos / self.mass.sum()) if reference is None else np.asarray(reference)
         self.mass2 = np.repeat(np.asarray(mass, dtype=float), 2)
         self.cn, self.ct = drag_prefactors(network, fluid_density)
         self.actuator = actuator
@@ -137,12 +145,30 @@ class NumpyReferenceStepper:
         jx = 0.5 * np.concatenate([np.concatenate([-ge, ge], axis=2)] * 2, axis=1)
         return force, jv, jx
 
+    def _body_damping(self, x, v):
+        """-D_L nu of the rigid body spread over the nodes by mass (core/body_damping.py)."""
+        xu, yv, nr = self.body_damping
+        m = self.mass
+        p, u = x.reshape(-1, 2), v.reshape(-1, 2)
+        c, vc = m @ p / m.sum(), m @ u / m.sum()
+        rel, vrel = p - c, u - vc
+        inertia = m @ np.sum(rel ** 2, axis=1)
+        r = m @ (rel[:, 0] * vrel[:, 1] - rel[:, 1] * vrel[:, 0]) / inertia
+        ref = self.reference
+        th = np.arctan2(m @ (ref[:, 0] * rel[:, 1] - ref[:, 1] * rel[:, 0]), m @ np.sum(ref * rel, axis=1))
+        rot = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+        force = rot @ (np.array([-xu, -yv]) * (rot.T @ vc))
+        perp = np.column_stack([-rel[:, 1], rel[:, 0]])
+        return (m[:, None] * force / m.sum() + (m * (-nr * r) / inertia)[:, None] * perp).ravel()
+
     def _system(self, x, x_prev, v_prev, h):
         v = (x - x_prev) / h
         gs, hs = self._stretch(x)
         gb, hb = self._bend(x)
         fd, jv, jx = self._drag(x, v)
         resid = self.mass2 * (x - x_prev - h * v_prev) / h ** 2
+        if any(self.body_damping):
+            resid -= self._body_damping(x_prev, v_prev)
         resid += np.bincount(self.edof.ravel(), (gs - fd).ravel(), minlength=self.n)
         resid += np.bincount(self.bdof.ravel(), gb.ravel(), minlength=self.n)
         he = hs - jx - jv / h
