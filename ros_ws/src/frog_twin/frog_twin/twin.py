@@ -141,6 +141,11 @@ class PlannerWatch:
                     raise RuntimeError(f"{p.name} exited early:\n{p.log_text()[-3000:]}")
             self.spin(0.1)
 
+    def subscribed(self, node_name: str, topics) -> bool:
+        """Whether node ``node_name`` subscribes to every topic of ``topics`` (graph discovery)."""
+        return all(any(info.node_name == node_name for info in self.node.get_subscriptions_info_by_topic(t))
+                   for t in topics)
+
     def start_planner(self) -> str:
         self.wait(self.start_client.service_is_ready, 60, "planner_node/start service")
         future = self.start_client.call_async(self.Trigger.Request())
@@ -217,6 +222,10 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
         start("planner_node", {**sim_clock, "library_file": str(args.library), "autostart": False,
                                **as_dict(settings), **as_dict(path_settings)})
         watch.wait(lambda: watch.odom_count >= 5, 120, "odometry on /frog/odom (camera + tracker running)", procs)
+        # the metrics start at the planner's first decision: the recorder must hear it
+        recorded = ("/frog/sim/odom", "/frog/primitive", "/frog/planner/status")
+        watch.wait(lambda: watch.subscribed("recorder", recorded), 60,
+                   f"the recorder subscribed to {', '.join(recorded)}", procs)
         watch.start_planner()
         limit = duration or args.duration
         t_start = time.monotonic()
