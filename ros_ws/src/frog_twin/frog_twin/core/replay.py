@@ -386,30 +386,48 @@ def plot_replay(setup: ReplaySetup, twins: list[tuple[str, np.ndarray]], real: d
     import matplotlib.pyplot as plt
 
     from .metrics import signed_lateral_offset
+    def split(t, m):
+        """Indices up to the finish (the metrics' window) and after it."""
+        end = m["completion_time_s"]
+        n = len(t) if end is None else int(np.searchsorted(t, end + 1e-9))
+        return slice(0, max(n, 1)), slice(max(n - 1, 0), len(t))
+
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(14, 6.5), gridspec_kw={"width_ratios": [1, 1.3]})
     p = setup.path * 100
     ax.plot(p[:, 0], p[:, 1], "k--", lw=1.3, label="reference path")
-    ax.plot(setup.pose[:, 0] * 100, setup.pose[:, 1] * 100, color="tab:red", lw=1.8,
-            label=f"real robot (mean {100 * real['mean_distance_m']:.2f} cm)")
+    shown, lat_shown = [p], [np.zeros(1)]
+    lines = [("real robot", np.c_[setup.time, setup.pose[:, :2]], real, "tab:red")]
     colors = plt.cm.Blues(np.linspace(0.55, 0.95, max(len(twins), 1)))
-    for (label, tr), m, c in zip(twins, twin_metrics, colors):
-        ax.plot(tr[:, 1] * 100, tr[:, 2] * 100, color=c, lw=1.5,
+    lines += [(label, tr, m, c) for (label, tr), m, c in zip(twins, twin_metrics, colors)]
+    for label, tr, m, c in lines:
+        before, after = split(tr[:, 0], m)
+        ax.plot(tr[before, 1] * 100, tr[before, 2] * 100, color=c, lw=1.7,
                 label=f"{label} (mean {100 * m['mean_distance_m']:.2f} cm)")
+        ax.plot(tr[after, 1] * 100, tr[after, 2] * 100, ":", color=c, lw=1.0)
+        shown.append(tr[before, 1:3] * 100)
+        lat = signed_lateral_offset(tr[:, 1:3], setup.path) * 100
+        ax2.plot(tr[before, 0], lat[before], color=c, lw=1.5, label=label)
+        lat_shown.append(lat[before])
+        ax2.plot(tr[after, 0], lat[after], ":", color=c, lw=1.0)
     x0, y0, h0 = setup.start_pose
     ax.annotate("", xy=(100 * x0 + 4 * math.cos(h0), 100 * y0 + 4 * math.sin(h0)), xytext=(100 * x0, 100 * y0),
                 arrowprops={"arrowstyle": "->", "color": "k"})
     ax.plot(*p[-1], "r*", ms=13, label="goal")
-    ax.set_aspect("equal")
+    box = np.vstack(shown)
+    lo, hi = box.min(axis=0) - 4.0, box.max(axis=0) + 4.0          # up to the finish, 4 cm margin
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal", adjustable="box")
     ax.set(xlabel="x [cm] (log frame)", ylabel="y [cm]",
            title=f"{setup.name}: real vs twin (P = {setup.period:.3f} s, start heading {math.degrees(h0):.0f} deg)")
-    ax.legend(fontsize=8)
-    lat = signed_lateral_offset(setup.pose[:, :2], setup.path)
-    ax2.plot(setup.time, lat * 100, color="tab:red", lw=1.6, label="real")
-    for (label, tr), c in zip(twins, colors):
-        ax2.plot(tr[:, 0], signed_lateral_offset(tr[:, 1:3], setup.path) * 100, color=c, lw=1.3, label=label)
+    ax.legend(fontsize=8, title="dotted: after the finish", title_fontsize=7)
     for t in setup.decision_times:
         ax2.axvline(t, color="0.9", lw=0.6, zorder=0)
     ax2.axhline(0.0, color="k", lw=0.8)
+    ends = [tr[split(tr[:, 0], m)[0], 0][-1] for _, tr, m, _ in lines]
+    ax2.set_xlim(0.0, max(ends) + 2.0)
+    lat_all = np.concatenate(lat_shown)
+    ax2.set_ylim(lat_all.min() - 1.0, lat_all.max() + 1.0)
     ax2.set(xlabel="time since the first decision [s]", ylabel="signed lateral offset [cm] (+ left of the path)",
             title=f"mean signed offset: real {100 * real['mean_signed_lateral_m']:+.2f} cm, twin "
                   + ", ".join(f"{100 * m['mean_signed_lateral_m']:+.2f}" for m in twin_metrics) + " cm")
