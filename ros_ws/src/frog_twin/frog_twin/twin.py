@@ -21,6 +21,18 @@ frog-twin --path sine --real-time-factor 2 --seed 3
 frog-twin --path line --no-vision            # ground-truth odometry instead of camera + tracker
 frog-twin --path ellipse --direct            # planner -> simulator without the serial link
 frog-twin --path line --depth 2 --w-heading 150 --duration 60
+
+Hardware replay: re-run one of the real robot's closed-loop experiments (the authors' logs,
+shared/data/frog/hardware_runs/) from its logged start pose (tag offset applied), at its
+fitted decision period, along its reference path as waypoints; the real and the twin's
+trajectories overlaid on the path (<run>_replay.png), a table real vs twin (mean / max
+distance, signed mean lateral offset + left of the path, time, primitives, speed) and a JSON.
+--paper-cost runs the paper's planner (what the robot ran), otherwise the project's settings:
+
+frog-twin --replay ../shared/data/frog/hardware_runs/sin1.csv --paper-cost          # whole chain + MP4
+frog-twin --replay RUN.csv --path RUN_path.csv --no-vision --direct --duration 20   # fast, simulator only
+frog-twin --replay-all ../shared/data/frog/hardware_runs --no-vision --direct --paper-cost
+frog-twin --replay-all DIR --no-vision --direct --seeds 3 --out runs/replay3        # pooled over seeds
 """
 
 from __future__ import annotations
@@ -153,6 +165,11 @@ class PlannerWatch:
                     raise RuntimeError(f"{p.name} exited early:\n{p.log_text()[-3000:]}")
             self.spin(0.1)
 
+    def subscribed(self, node_name: str, topics) -> bool:
+        """Whether node ``node_name`` subscribes to every topic of ``topics`` (graph discovery)."""
+        return all(any(info.node_name == node_name for info in self.node.get_subscriptions_info_by_topic(t))
+                   for t in topics)
+
     def start_planner(self) -> str:
         self.wait(self.start_client.service_is_ready, 60, "planner_node/start service")
         future = self.start_client.call_async(self.Trigger.Request())
@@ -179,11 +196,24 @@ def _path_start_pose(args, path_settings):
     return float(x0[0]), float(x0[1]), h0
 
 
-def run_path(args, name: str, out: Path) -> dict:
-    """One closed-loop run of the twin on path ``name``; returns its metrics."""
+def run_path(args, name: str, out: Path, path_settings=None, start_pose=None, settings=None, duration=None) -> dict:
+    """One closed-loop run of the twin on path ``name``; returns its metrics (see :func:`run_twin`)."""
+    return run_twin(args, name, out, path_settings, start_pose, settings, duration)[1]
+
+
+def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, settings=None, duration=None):
+    """One closed-loop run of the twin; returns (its recording, its metrics).
+
+    By default the path is the paper's path ``name`` placed in the camera's view, the start
+    is on it (``--lateral-offset``) and the planner's settings are ``args.settings``;
+    ``path_settings`` (a :class:`PathSettings`), ``start_pose`` (x, y, heading) and
+    ``settings`` (a :class:`PlannerSettings`) replace them (the hardware replay), and
+    ``duration`` [s simulated] replaces ``args.duration``.
+    """
     out.mkdir(parents=True, exist_ok=True)
-    path_settings = placed_path_settings(args.path_settings, name)
-    x0, y0, h0 = _path_start_pose(args, path_settings)
+    path_settings = path_settings or placed_path_settings(args.path_settings, name)
+    settings = settings or args.settings
+    x0, y0, h0 = start_pose or _path_start_pose(args, path_settings)
     domain = acquire_domain()
     sim_clock = {"use_sim_time": True}
     procs: list[NodeProcess] = []
@@ -214,10 +244,14 @@ def run_path(args, name: str, out: Path) -> dict:
             watch.wait(lambda: link.exists(), 60, "the robot emulator's serial device", procs)
             start("bridge_node", {**sim_clock, "port": str(link)})
         start("planner_node", {**sim_clock, "library_file": str(args.library), "autostart": False,
-                               **as_dict(args.settings), **as_dict(path_settings)})
+                               **as_dict(settings), **as_dict(path_settings)})
         watch.wait(lambda: watch.odom_count >= 5, 120, "odometry on /frog/odom (camera + tracker running)", procs)
+        # the metrics start at the planner's first decision: the recorder must hear it
+        recorded = ("/frog/sim/odom", "/frog/primitive", "/frog/planner/status")
+        watch.wait(lambda: watch.subscribed("recorder", recorded), 60,
+                   f"the recorder subscribed to {', '.join(recorded)}", procs)
         watch.start_planner()
-        limit = args.duration
+        limit = duration or args.duration
         t_start = time.monotonic()
         print(f"  {name}: following (at most {limit:.0f} s simulated, real-time factor {args.real_time_factor:g})",
               flush=True)
@@ -254,17 +288,18 @@ def run_path(args, name: str, out: Path) -> dict:
     metrics = twin_report.run_metrics(rec, name)
     metrics["wall_time_s"] = wall
     metrics["recording"] = [str(f) for f in files]
-    metrics["settings"] = {"planner": as_dict(args.settings), "real_time_factor": args.real_time_factor,
+    metrics["settings"] = {"planner": as_dict(settings), "path": as_dict(path_settings),
+                           "start_pose": [x0, y0, h0], "real_time_factor": args.real_time_factor,
                            "seed": args.seed, "vision": not args.no_vision, "serial": not args.direct,
                            "limb_strength_sd": args.limb_strength_sd}
-    w = args.settings.weights
+    w = settings.weights
     twin_report.plot_run(rec, metrics, out.parent / f"{name}.png", weights=(w.distance, w.heading, w.progress))
     metrics["plot"] = str(out.parent / f"{name}.png")
     project = None if args.no_vision else _projector(rec)
     frames = twin_report.write_video(rec, out.parent / f"{name}.mp4", project)
     metrics["video"] = str(out.parent / f"{name}.mp4") if frames else None
     (out.parent / f"{name}.json").write_text(json.dumps(metrics, indent=1, default=float) + "\n")
-    return metrics
+    return rec, metrics
 
 
 def _projector(rec):
@@ -287,11 +322,27 @@ def _projector(rec):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="frog-twin", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--path", choices=[*PATH_NAMES, "all"], default="all", help="path(s) to follow (default all)")
+    ap.add_argument("--path", default=None,
+                    help=f"path(s) to follow: {', '.join(PATH_NAMES)} or all (default); with --replay the run's "
+                         "reference path CSV (default: <run>_path.csv beside RUN.csv)")
+    rg = ap.add_argument_group("hardware replay (issue 18)")
+    what = rg.add_mutually_exclusive_group()
+    what.add_argument("--replay", type=Path, metavar="RUN.csv",
+                      help="re-run this hardware log (authors' format) in the twin, beside the real trajectory")
+    what.add_argument("--replay-all", type=Path, metavar="DIR",
+                      help="replay every <run>.csv of DIR that has a <run>_path.csv; one summary table")
+    rg.add_argument("--paper-cost", action="store_true",
+                    help="the paper's planner, as the robot ran it: eq. 19 at the leaf, weights 500/50/300, tangent "
+                         "heading, relative metric (overrides the weight, look-ahead and correction options)")
+    rg.add_argument("--seeds", type=int, default=1,
+                    help="twin runs per log with seeds --seed, --seed+1, ... (pooled in the summary)")
+    rg.add_argument("--tag-offset-deg", type=float, default=None,
+                    help="body heading - tag theta [deg] (default: estimated on the folder's line runs)")
     ap.add_argument("--real-time-factor", type=float, default=1.0,
                     help="simulated seconds per wall second (all nodes follow /clock)")
     ap.add_argument("--seed", type=int, default=1, help="seed of every random element (noise, BLE jitter, limbs)")
-    ap.add_argument("--duration", type=float, default=150.0, help="simulated seconds at most per path")
+    ap.add_argument("--duration", type=float, default=None,
+                    help="simulated seconds at most per path (default 150; replays: twice the real run + 15)")
     ap.add_argument("--no-vision", action="store_true", help="ground-truth odometry instead of camera + tracker")
     ap.add_argument("--direct", action="store_true", help="planner -> simulator without bridge, pty and emulator")
     ap.add_argument("--limb-strength-sd", type=float, default=LIMB_STRENGTH_SD,
@@ -307,8 +358,27 @@ def main(argv=None) -> int:
                                              "waypoint_file"))
     ap.set_defaults(period=HARDWARE_PERIOD_S)
     args = ap.parse_args(argv)
-    if not (args.real_time_factor > 0 and args.duration > 0 and 0 <= args.limb_strength_sd < 1):
-        ap.error("--real-time-factor and --duration must be > 0, --limb-strength-sd in [0, 1)")
+    replaying = args.replay is not None or args.replay_all is not None
+    if args.duration is None and not replaying:
+        args.duration = 150.0
+    if not (args.real_time_factor > 0 and (args.duration is None or args.duration > 0)
+            and 0 <= args.limb_strength_sd < 1 and args.seeds >= 1):
+        ap.error("--real-time-factor and --duration must be > 0, --limb-strength-sd in [0, 1), --seeds >= 1")
+    if replaying:
+        if args.path is not None and args.replay is None:
+            ap.error("--path (a path CSV) goes with --replay; --replay-all finds <run>_path.csv itself")
+        args.path = Path(args.path) if args.path is not None else None
+        for f, what in ((args.replay, "log"), (args.path, "path file")):
+            if f is not None and not f.is_file():
+                ap.error(f"--replay {what} {f} does not exist")
+        if args.replay_all is not None and not args.replay_all.is_dir():
+            ap.error(f"--replay-all {args.replay_all} is not a folder")
+    else:
+        args.path = args.path or "all"
+        if args.path not in (*PATH_NAMES, "all"):
+            ap.error(f"--path {args.path!r}: expected one of {', '.join(PATH_NAMES)}, all (or --replay RUN.csv)")
+        if args.paper_cost or args.seeds != 1 or args.tag_offset_deg is not None:
+            ap.error("--paper-cost, --seeds and --tag-offset-deg go with --replay / --replay-all")
     try:
         args.settings = from_arguments(PlannerSettings, args)
         args.path_settings = from_arguments(PathSettings, args, path_type="line")
@@ -320,6 +390,13 @@ def main(argv=None) -> int:
         args.library = ensure_library(default_library, args.library_states)
     elif not args.library.exists():
         ap.error(f"library {args.library} does not exist (frog-library generate --out ...)")
+    if replaying:
+        from frog_twin.replay_cli import main_replay
+        try:
+            return main_replay(args, root)
+        except (OSError, ValueError) as exc:
+            print(f"frog-twin: error: {exc}", file=sys.stderr)
+            return 2
     out = args.out or root / "runs" / time.strftime("main_%Y%m%d_%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     names = PATH_NAMES if args.path == "all" else (args.path,)

@@ -60,3 +60,65 @@ def test_latency_pairs_each_firing_with_the_latest_send():
     assert lat["n"] == 4
     assert lat["median_s"] == pytest.approx(np.median([0.03, 0.045, 0.02, 0.1]))
     assert lat["max_s"] == pytest.approx(0.1)
+
+
+# ------------------------------------------------------------------ signed lateral offset, finish time
+def _circle(radius, n=400, turns=0.9, ccw=True):
+    a = np.linspace(0.0, 2 * np.pi * turns, n)
+    return np.c_[radius * np.cos(a), (1 if ccw else -1) * radius * np.sin(a)], a
+
+
+@pytest.mark.parametrize("side", [+1, -1])
+def test_signed_lateral_offset_on_a_straight_path(side):
+    """2 cm to the left of a line along +x gives +0.02 m, to the right -0.02 m; any heading of the line."""
+    from frog_twin.core.metrics import signed_lateral_offset
+    for heading in (0.0, 1.0, 2.5, -2.0):
+        c, s = math.cos(heading), math.sin(heading)
+        path = np.c_[np.linspace(0, 0.5, 60) * c, np.linspace(0, 0.5, 60) * s]
+        u = np.linspace(0.01, 0.49, 37)
+        left = np.array([-s, c])
+        pts = np.c_[u * c, u * s] + side * 0.02 * left
+        assert signed_lateral_offset(pts, path) == pytest.approx(np.full(len(u), side * 0.02), abs=1e-12)
+        m = tracking_metrics(np.linspace(0, 10, len(u)), pts, path)
+        assert m["mean_signed_lateral_m"] == pytest.approx(side * 0.02, abs=1e-12)
+        assert m["mean_distance_m"] == pytest.approx(0.02, abs=1e-12)
+
+
+@pytest.mark.parametrize("ccw", [True, False])
+def test_signed_lateral_offset_on_a_circle(ccw):
+    """On a counter-clockwise circle the inside is left (+), on a clockwise one right (-)."""
+    from frog_twin.core.metrics import signed_lateral_offset
+    radius = 0.14
+    path, _ = _circle(radius, ccw=ccw)
+    inner, _ = _circle(radius - 0.02, n=97, turns=0.85, ccw=ccw)
+    outer, _ = _circle(radius + 0.02, n=97, turns=0.85, ccw=ccw)
+    sag = radius * (1 - math.cos(np.pi * 0.9 / 399))      # the polyline's chord error
+    sign = 1.0 if ccw else -1.0
+    assert signed_lateral_offset(inner, path) == pytest.approx(np.full(97, sign * 0.02), abs=sag + 1e-9)
+    assert signed_lateral_offset(outer, path) == pytest.approx(np.full(97, -sign * 0.02), abs=sag + 1e-9)
+    t = np.linspace(0, 20, 97)
+    m = tracking_metrics(t, outer, path)
+    assert m["mean_signed_lateral_m"] == pytest.approx(-sign * 0.02, abs=sag + 1e-9)
+    assert m["mean_distance_m"] == pytest.approx(0.02, abs=sag + 1e-9)
+
+
+def test_signed_lateral_offset_of_a_swing_averages_out():
+    """Equal swings to both sides: mean distance 1 cm (|sin| mean 2/pi * amplitude), signed mean 0."""
+    path = np.c_[np.linspace(0, 1.0, 200), np.zeros(200)]
+    x = np.linspace(0.0, 1.0, 4001)[:-1]
+    y = 0.01 * np.pi / 2 * np.sin(2 * np.pi * 4 * x)
+    m = tracking_metrics(np.linspace(0, 40, len(x)), np.c_[x, y], path)
+    assert m["mean_signed_lateral_m"] == pytest.approx(0.0, abs=1e-6)
+    assert m["mean_distance_m"] == pytest.approx(0.01, rel=1e-3)
+
+
+def test_finish_time_within_tolerance_or_past_the_finish_line():
+    from frog_twin.core.metrics import finish_time
+    path = np.c_[np.linspace(0, 0.4, 100), np.zeros(100)]
+    t = np.linspace(0.0, 45.0, 451)                        # 0.1 s steps, 1 cm/s
+    on_path = np.c_[0.01 * t, np.zeros_like(t)]
+    assert finish_time(t, on_path, path, goal_tolerance=0.0351) == pytest.approx(36.5)   # 3.5 cm before the end
+    wide = np.c_[0.01 * t, np.full_like(t, 0.05)]          # 5 cm to the side: finishes past the finish line
+    assert finish_time(t, wide, path, goal_tolerance=0.03) == pytest.approx(40.1)
+    short = np.c_[0.005 * t, np.zeros_like(t)]             # not even at the end after 45 s
+    assert finish_time(t, short, path) is None

@@ -22,6 +22,41 @@ def distance_to_polyline(points, path) -> np.ndarray:
     return np.min(np.linalg.norm(a + t[..., None] * d - p, axis=-1), axis=1)
 
 
+def signed_lateral_offset(points, path) -> np.ndarray:
+    """Signed distance [m] of each point (N, 2) to the polyline ``path`` (M, 2): + left of the path.
+
+    "Left" is seen along the path's direction (from its first point to its last): the sign
+    is that of the cross product of the closest segment's direction and the vector from
+    the segment's start to the point. Its magnitude is :func:`distance_to_polyline`.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 2)[:, None, :]
+    ref = np.asarray(path, dtype=float)
+    a, d = ref[:-1], np.diff(ref, axis=0)
+    t = np.clip(((p - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0.0, 1.0)
+    dist = np.linalg.norm(a + t[..., None] * d - p, axis=-1)
+    k = np.argmin(dist, axis=1)
+    rel = p[:, 0, :] - a[k]
+    cross = d[k, 0] * rel[:, 1] - d[k, 1] * rel[:, 0]
+    return np.where(cross < 0.0, -1.0, 1.0) * dist[np.arange(len(k)), k]
+
+
+def finish_time(time, positions, path, goal_tolerance: float = 0.03):
+    """When the robot finished the path [s] (same clock as ``time``), or None: the first sample
+    within ``goal_tolerance`` of the path's end, or past the finish line (the normal to the
+    path at its end, see :func:`samples_before_finish`), after the nearest path point has
+    been in the path's second half. Pure geometry, so a real log and a simulated run are
+    timed alike."""
+    t = np.asarray(time, dtype=float)
+    pts = np.asarray(positions, dtype=float).reshape(-1, 2)
+    ref = np.asarray(path, dtype=float)
+    nearest = np.argmin(np.linalg.norm(pts[:, None, :] - ref[None], axis=-1), axis=1)
+    half_done = np.maximum.accumulate(nearest >= len(ref) // 2)
+    near = np.nonzero(half_done & (np.linalg.norm(pts - ref[-1], axis=1) <= goal_tolerance))[0]
+    crossed = samples_before_finish(pts, ref)
+    first = min(int(near[0]) if len(near) else len(pts), crossed)
+    return float(t[first]) if first < len(pts) else None
+
+
 def samples_before_finish(positions, path_points) -> int:
     """Number of samples before the robot crosses the finish line (the normal to the path
     at its end) on its final approach: past it, the distance to the polyline measures
@@ -71,6 +106,8 @@ def tracking_metrics(time, positions, path, goal_time=None, primitives=()) -> di
     -------
     dict
         ``mean_distance_m``, ``max_distance_m`` (samples up to the goal or the finish line),
+        ``mean_signed_lateral_m`` (the same samples' signed offset, + left of the path's
+        direction, see :func:`signed_lateral_offset`),
         ``completion_time_s`` (None without a goal), ``final_progress`` (0-1, by arc length of
         the last sample's closest point), ``mean_speed_along_path_m_per_s`` (arc length
         covered / elapsed time), ``primitives_used`` (counts, 'I' excluded).
@@ -86,12 +123,14 @@ def tracking_metrics(time, positions, path, goal_time=None, primitives=()) -> di
     n = samples_before_finish(xy[keep], ref)
     t, xy = t[keep][:max(n, 1)], xy[keep][:max(n, 1)]
     dist = distance_to_polyline(xy, ref)
+    lateral = signed_lateral_offset(xy, ref)
     length = float(np.sum(np.linalg.norm(np.diff(ref, axis=0), axis=1)))
     s = arc_length_progress(xy, ref)
     end = (goal_time if goal_time is not None else t[-1]) - float(np.asarray(time, dtype=float)[0])
     covered = length if goal_time is not None else float(s[-1] - s[0])
     return {
         "mean_distance_m": float(dist.mean()), "max_distance_m": float(dist.max()),
+        "mean_signed_lateral_m": float(lateral.mean()),
         "completion_time_s": float(end) if goal_time is not None else None,
         "final_progress": 1.0 if goal_time is not None else float(s[-1] / length),
         "mean_speed_along_path_m_per_s": covered / end if end > 0 else 0.0,

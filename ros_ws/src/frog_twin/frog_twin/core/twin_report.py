@@ -87,9 +87,9 @@ def plot_run(rec: TwinRecording, metrics: dict, png, weights=(500.0, 50.0, 300.0
     hw = metrics.get("hardware_mean_distance_cm")
     if hw:
         ax.axhspan(hw[0], hw[1], color="0.85", label=f"real robot mean {hw[0]}-{hw[1]} cm")
+        ax.legend(fontsize=8)
     ax.set(xlabel="time [s]", ylabel="distance to path [cm]",
            title=f"mean {metrics['mean_distance_m'] * 100:.2f} cm, max {metrics['max_distance_m'] * 100:.2f} cm")
-    ax.legend(fontsize=8)
     ax = axes[1, 0]
     st = rec.status[np.isfinite(rec.status[:, 2])] if len(rec.status) else rec.status
     if len(st):

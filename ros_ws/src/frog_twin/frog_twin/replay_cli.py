@@ -1,0 +1,138 @@
+"""``frog-twin --replay RUN.csv`` / ``--replay-all DIR``: the real robot's experiments re-run in the twin.
+
+The setup (waypoints, start pose, decision period, real trajectory) comes from
+:mod:`frog_twin.core.replay`; each replay is one :func:`frog_twin.twin.run_twin` (the whole
+chain of the main job, or simulator-only with ``--no-vision --direct``); the real run and
+the twin's ground truth are scored by the same :func:`~frog_twin.core.replay.replay_metrics`.
+
+Per run it writes into ``<out>/<run>/``: ``<run>_replay.png`` (real and twin trajectories on
+the path, signed lateral offset over time), ``<run>_replay.{txt,csv,json}`` (the table real
+vs twin and every number), and per seed the twin's own outputs (``<run>[_s<seed>].png``,
+``.mp4`` with vision, ``.json``, the MCAP recording and the node logs). ``--replay-all``
+adds ``summary.{txt,csv,json}`` with the pooled row.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import dataclasses
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from frog_planner.core.settings import PathSettings, PlannerSettings, from_arguments
+
+from frog_twin.core import replay
+
+#: Simulated time allowed per replay when --duration is not given: this many times the real
+#: run's duration, plus REPLAY_EXTRA_S.
+REPLAY_DURATION_FACTOR = 2.0
+REPLAY_EXTRA_S = 15.0
+
+
+def replay_planner_settings(args, period: float) -> PlannerSettings:
+    """The planner of a replay at the run's ``period``: the paper's (``--paper-cost``: eq. 19 at the
+    leaf with weights 500/50/300, tangent heading, relative metric, nearest-state transitions; see
+    :meth:`PlannerSettings.paper`) or the project's settings from the command line."""
+    if args.paper_cost:
+        return PlannerSettings.paper(period=period, depth=args.settings.depth, metric="relative",
+                                     k_neighbours=args.settings.k_neighbours)
+    return dataclasses.replace(args.settings, period=period)
+
+
+def _write_rows(rows: list[dict], file: Path) -> None:
+    with open(file, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: ("" if v is None else v) for k, v in r.items()})
+
+
+def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: str = "") -> dict:
+    """Replay one hardware run for every seed; write its plot and table; return all numbers."""
+    from frog_twin.twin import run_twin
+    setup = replay.replay_setup(run_csv, path_csv, None if args.tag_offset_deg is None
+                                else math.radians(args.tag_offset_deg))
+    tol = args.path_settings.goal_tolerance
+    real = replay.real_metrics(setup, goal_tolerance=tol)
+    settings = replay_planner_settings(args, setup.period)
+    folder = out / setup.name
+    folder.mkdir(parents=True, exist_ok=True)
+    waypoints = replay.write_waypoints(setup.path, folder / f"{setup.name}_waypoints.csv")
+    path_settings = dataclasses.replace(args.path_settings, path_type="waypoints", waypoint_file=str(waypoints))
+    duration = args.duration or REPLAY_DURATION_FACTOR * float(setup.time[-1]) + REPLAY_EXTRA_S
+    x0, y0, h0 = setup.start_pose
+    print(f"replay {progress}{setup.name}: period {setup.period:.4f} s, start ({x0:.3f}, {y0:.3f}) m "
+          f"{math.degrees(h0):.1f} deg, tag offset {math.degrees(setup.tag_offset):+.1f} deg "
+          f"({setup.tag_offset_source}); planner {'paper' if args.paper_cost else 'project'}; "
+          f"at most {duration:.0f} s simulated", flush=True)
+    twins, tracks = [], []
+    for seed in args.seed_list:
+        a = copy.copy(args)
+        a.seed = seed
+        label = setup.name if len(args.seed_list) == 1 else f"{setup.name}_s{seed}"
+        rec, tm = run_twin(a, label, folder / label, path_settings, setup.start_pose, settings, duration)
+        t0 = tm["start_time_s"]
+        truth = rec.truth[rec.truth[:, 0] >= t0 - 1e-9]
+        decided = [(t - t0, n) for t, n in rec.primitives if t >= t0 - 1e-9]
+        m = replay.replay_metrics(truth[:, 0] - t0, truth[:, 1:3], setup.path, [d for d, _ in decided],
+                                  [n for _, n in decided], goal_tolerance=tol)
+        m.update(seed=seed, planner_goal_time_s=tm["completion_time_s"], wall_time_s=tm["wall_time_s"],
+                 twin_plot=tm["plot"], video=tm["video"], recording=tm["recording"])
+        twins.append(m)
+        tracks.append((f"twin seed {seed}", np.c_[truth[:, 0] - t0, truth[:, 1:3]]))
+        print(f"  {label}: mean {100 * m['mean_distance_m']:.2f} cm (real {100 * real['mean_distance_m']:.2f}), "
+              f"lateral {100 * m['mean_signed_lateral_m']:+.2f} cm (real {100 * real['mean_signed_lateral_m']:+.2f}), "
+              f"finished {'yes' if m['finished'] else 'no'}, wall {tm['wall_time_s']:.0f} s", flush=True)
+    png = folder / f"{setup.name}_replay.png"
+    replay.plot_replay(setup, tracks, real, twins, png)
+    rows = replay.comparison_rows(setup.name, real, twins)
+    text = replay.format_rows(rows)
+    (folder / f"{setup.name}_replay.txt").write_text(text + "\n")
+    _write_rows(rows, folder / f"{setup.name}_replay.csv")
+    result = {"run": setup.name, "setup": setup.summary(), "planner": dataclasses.asdict(settings),
+              "planner_kind": "paper" if args.paper_cost else "project", "real": real, "twins": twins,
+              "rows": rows, "plot": str(png),
+              "settings": {"vision": not args.no_vision, "serial": not args.direct, "seeds": args.seed_list,
+                           "real_time_factor": args.real_time_factor, "limb_strength_sd": args.limb_strength_sd,
+                           "duration_s": duration, "library": str(args.library)},
+              "units": {"distance": "m (rows: cm)", "time": "s from the first decision", "speed": "m/s"}}
+    (folder / f"{setup.name}_replay.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
+    return result
+
+
+def main_replay(args, root: Path) -> int:
+    """``--replay`` / ``--replay-all`` (arguments already parsed and checked by ``frog-twin``)."""
+    args.seed_list = [args.seed + i for i in range(args.seeds)]
+    args.path_settings = from_arguments(PathSettings, args, path_type="line")
+    kind = "paper" if args.paper_cost else "project"
+    out = args.out or root / "runs" / time.strftime(f"replay_{kind}_%Y%m%d_%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    if args.replay is not None:
+        res = replay_run(args, args.replay, args.path, out)
+        print()
+        print(replay.format_rows(res["rows"]))
+        print(f"\nplots, tables, JSON: {out / res['run']}")
+        return 0
+    runs = replay.find_runs(args.replay_all)
+    if not runs:
+        raise FileNotFoundError(f"{args.replay_all}: no <run>.csv with a matching <run>_path.csv")
+    results = []
+    for i, (run_csv, path_csv) in enumerate(runs):
+        results.append(replay_run(args, run_csv, path_csv, out, progress=f"[{i + 1}/{len(runs)}] "))
+    rows = replay.summary_rows(results)
+    pool = replay.pooled(results)
+    text = replay.format_summary(rows, pool)
+    detail = "\n".join(replay.format_rows(r["rows"]) for r in results)
+    (out / "summary.txt").write_text(f"planner: {kind}\n{text}\n\nper run and seed:\n{detail}\n")
+    _write_rows(rows + [replay.pooled_row(rows, pool)], out / "summary.csv")
+    (out / "summary.json").write_text(json.dumps({"planner": kind, "rows": rows, "pooled": pool,
+                                                  "runs": results}, indent=1, default=float) + "\n")
+    print(f"\nplanner: {kind}")
+    print(text)
+    print(f"\nper-run plots and tables: {out}/<run>/; summary: {out / 'summary.txt'} (.csv, .json)")
+    return 0
