@@ -46,7 +46,8 @@ import time
 from pathlib import Path
 
 from frog_planner.core.settings import PathSettings, PlannerSettings, add_arguments, as_dict, from_arguments
-from soft_robot_common.processes import NodeProcess, acquire_domain, ros_args
+from soft_robot_common.graph import GraphError, load_graph
+from soft_robot_common.processes import NodeProcess, acquire_domain
 
 from frog_twin.core import twin_report
 from frog_twin.core.twin_recording import read_twin_recording
@@ -189,6 +190,34 @@ class PlannerWatch:
         self._rclpy.shutdown(context=self.context)
 
 
+#: The frog's node graph (package data; also installed as share/frog_twin/config/frog_graph.yaml).
+GRAPH_FILE = Path(__file__).resolve().parent / "config" / "frog_graph.yaml"
+VISION_NODES = ("camera_sim", "tracker_node", "image_preview")
+SERIAL_NODES = ("robot_emulator", "bridge_node")
+
+
+def twin_graph(args, name: str, out: Path, path_settings, settings, start_pose, graph_file=GRAPH_FILE):
+    """The twin's processes for one run: the graph file's sim mode with this run's values."""
+    x0, y0, h0 = start_pose
+    overrides = {
+        "recorder": {"output_dir": str(out / "recording"), "file_prefix": name},
+        "sim_node": {"real_time_factor": args.real_time_factor, "initial_x": x0, "initial_y": y0,
+                     "initial_heading": h0, "execute_primitives": args.direct,
+                     "odom_alias_topic": "frog/odom" if args.no_vision else "",
+                     "limb_strength_sd": args.limb_strength_sd, "seed": args.seed},
+        "planner_node": {"library_file": str(args.library), **as_dict(settings), **as_dict(path_settings)},
+    }
+    if not args.no_vision:
+        overrides["camera_sim"] = {"seed": args.seed}
+        overrides["image_preview"] = {"rate_hz": args.video_rate}
+    if not args.direct:
+        overrides["robot_emulator"] = {"link_path": str(out / "robot_tty"), "seed": args.seed,
+                                       "command_log": str(out / "robot_commands.csv")}
+        overrides["bridge_node"] = {"port": str(out / "robot_tty")}
+    exclude = (*(VISION_NODES if args.no_vision else ()), *(SERIAL_NODES if args.direct else ()))
+    return load_graph(graph_file, "sim", overrides, exclude=exclude)
+
+
 def _path_start_pose(args, path_settings):
     path = path_settings.build()
     h0 = float(path.tangent_headings[0])
@@ -215,36 +244,15 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
     settings = settings or args.settings
     x0, y0, h0 = start_pose or _path_start_pose(args, path_settings)
     domain = acquire_domain()
-    sim_clock = {"use_sim_time": True}
     procs: list[NodeProcess] = []
     watch = PlannerWatch(domain)
-
-    def start(exe, params, label=None):
-        label = label or exe
-        p = NodeProcess([exe, *ros_args(params)], domain.env, out / f"{label}.log", label)
-        procs.append(p)
-        return p
-
+    graph = twin_graph(args, name, out, path_settings, settings, (x0, y0, h0))
     try:
-        start("recorder", {**sim_clock, "output_dir": str(out / "recording"), "file_prefix": name,
-                           "exclude_regex": r"image_raw$|debug_image$", "max_file_size_mb": 500.0})
-        start("sim_node", {"publish_clock": True, "real_time_factor": args.real_time_factor,
-                           "initial_x": x0, "initial_y": y0, "initial_heading": h0,
-                           "execute_primitives": args.direct,
-                           "odom_alias_topic": "frog/odom" if args.no_vision else "",
-                           "limb_strength_sd": args.limb_strength_sd, "seed": args.seed})
-        if not args.no_vision:
-            start("camera_sim", {**sim_clock, "seed": args.seed})
-            start("tracker_node", {**sim_clock})
-            start("image_preview", {**sim_clock, "rate_hz": args.video_rate})
-        if not args.direct:
-            link = out / "robot_tty"
-            start("robot_emulator", {**sim_clock, "link_path": str(link), "seed": args.seed,
-                                     "command_log": str(out / "robot_commands.csv")})
-            watch.wait(lambda: link.exists(), 60, "the robot emulator's serial device", procs)
-            start("bridge_node", {**sim_clock, "port": str(link)})
-        start("planner_node", {**sim_clock, "library_file": str(args.library), "autostart": False,
-                               **as_dict(settings), **as_dict(path_settings)})
+        for node in graph:
+            procs.append(node.start(domain.env, out))
+            if node.name == "robot_emulator":
+                link = Path(node.parameters["link_path"])
+                watch.wait(lambda: link.exists(), 60, "the robot emulator's serial device", procs)
         watch.wait(lambda: watch.odom_count >= 5, 120, "odometry on /frog/odom (camera + tracker running)", procs)
         # the metrics start at the planner's first decision: the recorder must hear it
         recorded = ("/frog/sim/odom", "/frog/primitive", "/frog/planner/status")
@@ -319,6 +327,36 @@ def _projector(rec):
     return lambda pts: pose.project(camera, pts) * scale
 
 
+def print_graph(args) -> int:
+    """``--print-graph``: the mode's nodes as ``ros2 run`` lines, with this run's values."""
+    mode = args.mode or "sim"
+    args.path = args.path if args.path in PATH_NAMES else "line"
+    try:
+        args.settings = from_arguments(PlannerSettings, args)
+        args.path_settings = from_arguments(PathSettings, args, path_type="line")
+    except ValueError as exc:
+        print(f"frog-twin: error: {exc}", file=sys.stderr)
+        return 2
+    out = args.out or Path("runs") / "main"
+    args.library = args.library or Path("runs") / "library" / "frog_default.npz"
+    path_settings = placed_path_settings(args.path_settings, args.path)
+    try:
+        if mode == "sim":
+            graph = twin_graph(args, args.path, out / args.path, path_settings, args.settings,
+                               _path_start_pose(args, path_settings))
+        else:
+            from frog_twin.real import real_graph
+            graph = real_graph(args, args.path, out / args.path, path_settings, args.settings)
+    except GraphError as exc:
+        print(f"frog-twin: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"# {graph.robot} graph, {mode} mode, from {GRAPH_FILE}; run each line in its own terminal")
+    print(f"# (every node also reads its section with: --ros-args --params-file {GRAPH_FILE})")
+    for line in graph.ros2_run_lines():
+        print(line)
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="frog-twin", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -353,11 +391,19 @@ def main(argv=None) -> int:
                     help="motion library (default runs/library/frog_default.npz, generated on first use)")
     ap.add_argument("--library-states", type=int, default=200, help="size of the default library if generated")
     ap.add_argument("--out", type=Path, default=None, help="run folder (default runs/main_<time>)")
+    gg = ap.add_argument_group("the graph (frog_twin/config/frog_graph.yaml)")
+    gg.add_argument("--print-graph", action="store_true",
+                    help="print the equivalent 'ros2 run' command lines of --mode and exit (nothing is started)")
+    gg.add_argument("--mode", choices=("sim", "real"), default=None,
+                    help="with --print-graph: the twin's graph (sim, default) or the real robot's (real; implied by "
+                         "--robot-port / --camera)")
     add_arguments(ap, PlannerSettings)
     add_arguments(ap, PathSettings, exclude=("path_type", "path_start_x", "path_start_y", "path_heading",
                                              "waypoint_file"))
     ap.set_defaults(period=HARDWARE_PERIOD_S)
     args = ap.parse_args(argv)
+    if args.print_graph:
+        return print_graph(args)
     replaying = args.replay is not None or args.replay_all is not None
     if args.duration is None and not replaying:
         args.duration = 150.0

@@ -6,7 +6,9 @@ what the robot fired and would loop back from the emulator), writes ``p``/``h`` 
 the serial port, publishes every line it wrote on ``frog/bridge/sent`` (LimbActivation,
 stamped at the write), the robot's orientation on ``frog/imu`` (sensor_msgs/Imu) and the
 link's health on ``diagnostics``. An ``EMERGENCY`` line stops all actuation until
-``~/clear_emergency`` (std_srvs/Trigger). The protocol, the limb protection and the link
+``~/clear_emergency`` (std_srvs/Trigger); so does a message on ``frog/stop``
+(std_msgs/Empty, the run's one stop: the planner stops deciding and the bridge cancels
+every pending pulse at once). The protocol, the limb protection and the link
 state machine are in :mod:`frog_bridge.core`.
 """
 
@@ -24,6 +26,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
 from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from std_msgs.msg import Empty
 from std_srvs.srv import Trigger
 
 from frog_bridge.core.limbs import PRIMITIVE_NAMES, limb_names
@@ -111,6 +114,7 @@ class BridgeNode(Node):
         self.lost_at: float | None = None
         self.was_stalled = False
         self._due_timer = None
+        self.stop_reason: str | None = None             # latched by frog/stop
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
 
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -120,6 +124,7 @@ class BridgeNode(Node):
         self.create_subscription(Primitive, "frog/primitive", self.on_primitive, qos)
         self.create_subscription(LimbActivation, "frog/limb_command", self.on_limb_command, qos)
         self.create_service(Trigger, "~/clear_emergency", self.on_clear_emergency)
+        self.create_subscription(Empty, "frog/stop", self.on_stop, qos)
 
         # The reader thread wakes the executor through a guard condition: all protocol logic
         # runs in the executor thread.
@@ -176,6 +181,9 @@ class BridgeNode(Node):
             self.get_logger().warn(f"refused: {reason}")
 
     def _link_allows(self, what: str) -> bool:
+        if self.stop_reason is not None:
+            self._refuse(REFUSED_EMERGENCY, f"{what}: {self.stop_reason} (call ~/clear_emergency)", throttle=True)
+            return False
         if self.get_clock().now().nanoseconds == 0:
             self._refuse(REFUSED_LINK, f"{what}: the node clock has not started (use_sim_time and no /clock yet)",
                          throttle=True)
@@ -307,7 +315,19 @@ class BridgeNode(Node):
                                     f"pulse(s) cancelled) until ~/clear_emergency")
             self.publish_diagnostics()
 
+    def on_stop(self, msg) -> None:
+        """frog/stop: cancel every pending pulse now and refuse new ones until ~/clear_emergency."""
+        n = len(self.scheduler.cancel_all(CANCELLED_EMERGENCY))
+        self._arm_due_timer()
+        if self.stop_reason is None:
+            self.get_logger().warn(f"stop received on {self.resolve_topic_name('frog/stop')}: {n} pending pulse(s) "
+                                   "cancelled, no actuation until ~/clear_emergency")
+        self.stop_reason = "stopped by frog/stop"
+
     def on_clear_emergency(self, request, response):
+        stopped, self.stop_reason = self.stop_reason, None
+        if stopped:
+            self.get_logger().info("stop cleared")
         with self.link.lock:
             was = self.supervisor.clear_emergency()
             state = self.supervisor.state

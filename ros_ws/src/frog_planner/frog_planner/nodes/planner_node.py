@@ -6,7 +6,8 @@ pose in the world frame, twist in the body frame per REP-105), asks
 ``frog/primitive`` with the decision and the planner's state on ``frog/planner/status``
 (relative names: ``__ns`` moves them). The reference path is latched on ``frog/path``. It
 publishes primitive I (no action), says why in the status and logs it when the state
-changes: stopped (``~/stop``), goal reached, odometry missing or older than
+changes: stopped (``~/stop``, or ``frog/stop``, std_msgs/Empty, the run's one stop that
+also reaches the bridge), goal reached, odometry missing or older than
 ``stale_periods`` periods, or a library that cannot be used. Weights, depth, look-aheads
 and the path can be changed while running (``ros2 param set``).
 """
@@ -22,6 +23,7 @@ from nav_msgs.msg import Path as PathMsg
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from soft_robot_common import ConfigurationError, Param, declare_parameters, params_from_dataclass, run_node
+from std_msgs.msg import Empty
 from std_srvs.srv import Trigger
 
 from frog_planner.core.library_file import LibraryFormatError
@@ -90,6 +92,7 @@ class PlannerNode(Node):
         self.create_subscription(Odometry, p["odom_topic"], self.on_odom, qos)
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/stop", self.on_stop)
+        self.create_subscription(Empty, "frog/stop", self.on_stop_topic, qos)
         self.model = None
         self.planner = None
         self.library_error = None
@@ -186,6 +189,11 @@ class PlannerNode(Node):
         self.running = False
         response.success, response.message = True, "stopped; publishing primitive I"
         return response
+
+    def on_stop_topic(self, msg) -> None:
+        if self.running:
+            self.get_logger().warn(f"stop received on {self.resolve_topic_name('frog/stop')}")
+        self.running = False
 
     # -- decisions -----------------------------------------------------------------------------
     def _state(self):
