@@ -9,7 +9,9 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', ['softkin_fk/config/finger_graph.yaml']),
     ],
+    package_data={package_name: ['config/*.yaml']},
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='Soft robot stack developers',
