@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import math
 import sys
 from pathlib import Path
 
@@ -277,6 +278,51 @@ def cmd_render(a) -> int:
     return 0
 
 
+def _read_swim(path: Path):
+    """(t, measured body poses) of a tracker CSV (frog-vision track) or an MCAP's /frog/pose."""
+    if not path.is_file():
+        raise UsageError(f"{path}: no such file")
+    if path.suffix == ".mcap":
+        from frog_logger.core.log_files import read_messages
+        rows = []
+        for _, _, m in read_messages(path, topics=["/frog/pose"]):
+            q = m.pose.orientation
+            rows.append([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, m.pose.position.x, m.pose.position.y,
+                         math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))])
+        if not rows:
+            raise UsageError(f"{path}: no /frog/pose messages (record the tracker's pose)")
+        a = np.array(sorted(rows))
+        return a[:, 0], a[:, 1:]
+    with open(path) as f:
+        reader = csv.DictReader(f)
+        cols = reader.fieldnames or []
+        need = ("t", "x_measured", "y_measured", "heading_measured")
+        if any(c not in cols for c in need):
+            raise UsageError(f"{path}: needs columns {', '.join(need)} (the CSV of frog-vision track)")
+        rows = [[float(r[c]) for c in need] for r in reader if r.get("x_measured")]
+    if not rows:
+        raise UsageError(f"{path}: no row with a detected tag")
+    a = np.array(rows)
+    return a[:, 0], a[:, 1:]
+
+
+def cmd_tag_offset(a) -> int:
+    from frog_vision.core.pose import PoseSettings
+    from frog_vision.core.tag_offset import compose, estimate_tag_offset, invert, write_tag_offset
+    t, measured = _read_swim(Path(a.log))
+    used = tuple(a.measured_offset) if a.measured_offset else (PoseSettings().offset_x, 0.0, 0.0)
+    tag = compose(measured, invert(used))     # back to the tag's own pose
+    try:
+        r = estimate_tag_offset(t, tag, window=a.window)
+    except ValueError as exc:
+        raise UsageError(f"{a.log}: {exc}") from exc
+    write_tag_offset(r, a.output, source=str(a.log))
+    print(f"offset_yaw {math.degrees(r.offset_yaw):+.2f} +- {math.degrees(r.offset_yaw_sd):.2f} deg, offset_x "
+          f"{r.offset_x * 1e3:+.2f} +- {r.offset_x_sd * 1e3:.2f} mm, offset_y (lateral) {r.offset_y * 1e3:+.2f} +- "
+          f"{r.offset_y_sd * 1e3:.2f} mm from {r.windows} windows -> {a.output} (frog-twin --tag-offset)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="frog-vision", description=__doc__, epilog=EXAMPLES,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -321,6 +367,16 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--png", action="store_true", help="also write every frame as PNG")
     r.add_argument("-o", "--output", default="runs/render")
     r.set_defaults(func=cmd_render)
+    o = sub.add_parser("tag-offset", help="straight B swim (track CSV or MCAP) -> tag-to-body offset YAML",
+                       description="Measure the tracker's tag-to-body offset (offset_yaw, offset_x, offset_y with "
+                                   "their bootstrap spread) from a recorded straight swim; the file is what "
+                                   "frog-twin --tag-offset and tracker_node's offset_* parameters take.")
+    o.add_argument("log", help="frog-vision track CSV, or an MCAP recording with /frog/pose")
+    o.add_argument("--measured-offset", type=float, nargs=3, metavar=("X", "Y", "YAW"),
+                   help="offset the log's poses were measured with [m, m, rad] (default: the tracker's default)")
+    o.add_argument("--window", type=float, default=1.5, help="analysis window [s] (about one period)")
+    o.add_argument("-o", "--output", default="tag_offset.yaml")
+    o.set_defaults(func=cmd_tag_offset)
     return ap
 
 
