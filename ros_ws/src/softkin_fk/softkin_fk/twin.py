@@ -31,12 +31,24 @@ import time
 from pathlib import Path
 
 import numpy as np
-from soft_robot_common.processes import NodeProcess, acquire_domain, ros_args
+from soft_robot_common.graph import load_graph
+from soft_robot_common.processes import acquire_domain
 
 MM = 1e-3
-TOPICS = ["/finger/tendon_setpoints", "/finger/tip", "/finger/shape", "/finger/stepper_state",
-          "/finger/emulator/motor_state", "/finger/emulator/move_end", "/diagnostics",
-          "/finger/follow_curve/_action/status"]   # the recorder cannot decode action feedback types yet
+#: The finger's node graph (package data; also installed as share/softkin_fk/config/finger_graph.yaml).
+GRAPH_FILE = Path(__file__).resolve().parent / "config" / "finger_graph.yaml"
+
+
+def finger_graph(args, out: Path, port: str, graph_file=GRAPH_FILE):
+    """The finger's processes: the emulated board (sim) or a real one at ``--port`` (real)."""
+    overrides = {"recorder": {"output_dir": str(out / "recording")},
+                 "stepper_driver": {"port": port, "max_cable_speed": args.cable_speed,
+                                    "banner_timeout": 3.0 if args.port else 1.0},
+                 "kinematics_node": {"resolution": args.resolution, "config_samples": args.config_samples,
+                                     "tolerance": args.lam_mm * MM, "hold_rest_cables": args.hold_rest_cables}}
+    if not args.port:
+        overrides["marlin_emulator"] = {"port_link": port}
+    return load_graph(graph_file, "real" if args.port else "sim", overrides)
 
 
 def _stamp(msg) -> float:
@@ -296,28 +308,20 @@ def main(argv=None) -> int:
     os.environ.update(ROS_DOMAIN_ID=env["ROS_DOMAIN_ID"], ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     port = args.port or str((out / "marlin_pty").resolve())
     procs = []
+    graph = finger_graph(args, out, port)
 
-    def start(name, argv):
-        pr = NodeProcess(argv, env, out / f"{name}.log", name)
+    def start(name):
+        pr = graph[name].start(env, out)
         procs.append(pr)
         return pr
 
     t_start = time.monotonic()
     try:
-        rec = start("recorder", ["recorder", *ros_args(dict(output_dir=str(out / "recording"), file_prefix="twin",
-                                                            topics=TOPICS, include_hidden=True))])
-        rec.wait_for_log("recording", 60)
+        start("recorder").wait_for_log("recording", 60)
         if not args.port:
-            start("marlin_emulator", ["marlin_emulator", *ros_args(dict(port_link=port))]).wait_for_log(
-                "emulated Marlin board", 60)
-        # a real Arduino resets when the port opens and prints its banner ~2 s later
-        start("stepper_driver", ["stepper_driver", *ros_args(dict(port=port, max_cable_speed=args.cable_speed,
-                                                                  banner_timeout=3.0 if args.port else 1.0))]
-              ).wait_for_log("board ready", 60)
-        kin = start("kinematics_node", ["kinematics_node", *ros_args(dict(
-            resolution=args.resolution, config_samples=args.config_samples, tolerance=args.lam_mm * MM,
-            hold_rest_cables=args.hold_rest_cables))])
-        kin.wait_for_log("ready in", 300)
+            start("marlin_emulator").wait_for_log("emulated Marlin board", 60)
+        start("stepper_driver").wait_for_log("board ready", 60)
+        start("kinematics_node").wait_for_log("ready in", 300)
         startup = time.monotonic() - t_start
         runs = run_curves(args, env)
     finally:
