@@ -327,6 +327,70 @@ def _projector(rec):
     return lambda pts: pose.project(camera, pts) * scale
 
 
+def _prepare_real(ap, args):
+    """Check the real mode's options and read the tag offset file; an exit code to return, or None."""
+    args.mode = "real"
+    if args.replay is not None or args.replay_all is not None or args.no_vision or args.direct:
+        ap.error("--robot-port / --camera (the real robot) go without --replay, --replay-all, --no-vision, --direct")
+    if not args.print_graph and (args.robot_port is None or args.camera is None):
+        ap.error("the real robot needs both --robot-port and --camera")
+    for f, opt in ((args.camera_info, "--camera-info"), (args.tank_calibration, "--tank-calibration"),
+                   (args.tag_offset, "--tag-offset")):
+        if f is not None and not f.is_file():
+            ap.error(f"{opt} {f} does not exist")
+    if not (args.camera_fps > 0 and args.start_tolerance > 0 and args.tag_lost_timeout > 0):
+        ap.error("--camera-fps, --start-tolerance and --tag-lost-timeout must be > 0")
+    args.tag_offset_params = None
+    if args.tag_offset is not None:
+        from frog_vision.core.tag_offset import read_tag_offset
+        try:
+            args.tag_offset_params = read_tag_offset(args.tag_offset)
+        except ValueError as exc:
+            ap.error(str(exc))
+    elif not args.print_graph:
+        print("frog-twin: warning: no --tag-offset file: the tracker uses its default tag-to-body offset (the "
+              "simulator's centre of mass, not a measurement); measure it with 'frog-vision tag-offset'",
+              file=sys.stderr, flush=True)
+    if args.path == "all":
+        ap.error("the real robot follows one path: --path line, sine or ellipse")
+    return None
+
+
+def main_real(ap, args) -> int:
+    """The real robot: one path, pre-flight, run, stop, report."""
+    from frog_twin.real import PreflightError, run_real
+    args.path = args.path or "line"
+    if args.path not in PATH_NAMES:
+        ap.error(f"--path {args.path!r}: expected one of {', '.join(PATH_NAMES)}")
+    if args.duration is None:
+        args.duration = 150.0
+    try:
+        args.settings = from_arguments(PlannerSettings, args)
+        args.path_settings = from_arguments(PathSettings, args, path_type="line")
+    except ValueError as exc:
+        ap.error(str(exc))
+    if args.library is None:
+        args.library = ensure_library(repo_root() / "runs" / "library" / "frog_default.npz", args.library_states)
+    elif not args.library.exists():
+        ap.error(f"library {args.library} does not exist (frog-library generate --out ...)")
+    out = args.out or repo_root() / "runs" / time.strftime("real_%Y%m%d_%H%M%S")
+    print(f"real robot: {args.path} path, port {args.robot_port}, camera {args.camera} -> {out}", flush=True)
+    try:
+        m = run_real(args, args.path, out / args.path, placed_path_settings(args.path_settings, args.path),
+                     args.settings)
+    except PreflightError as exc:
+        print(f"frog-twin: {exc}", file=sys.stderr)
+        return 2
+    except (GraphError, OSError, ValueError) as exc:
+        print(f"frog-twin: error: {exc}", file=sys.stderr)
+        return 2
+    (out / "metrics.json").write_text(json.dumps([m], indent=1, default=float) + "\n")
+    print()
+    print(twin_report.summary_table([m]))
+    print(f"stopped: {m['stop_reason']}; plots, video, metrics: {out}")
+    return 0
+
+
 def print_graph(args) -> int:
     """``--print-graph``: the mode's nodes as ``ros2 run`` lines, with this run's values."""
     mode = args.mode or "sim"
@@ -391,6 +455,22 @@ def main(argv=None) -> int:
                     help="motion library (default runs/library/frog_default.npz, generated on first use)")
     ap.add_argument("--library-states", type=int, default=200, help="size of the default library if generated")
     ap.add_argument("--out", type=Path, default=None, help="run folder (default runs/main_<time>)")
+    rr = ap.add_argument_group("the real robot (issue 20): the same graph with the real camera and port")
+    rr.add_argument("--robot-port", type=Path, default=None, help="serial device of the BLE relay (e.g. /dev/ttyACM0)")
+    rr.add_argument("--camera", default=None, help="camera_node source: a device (/dev/video0), an index, a video file")
+    rr.add_argument("--camera-info", type=Path, default=None, help="the camera's camera_calibration YAML")
+    rr.add_argument("--camera-fps", type=float, default=30.0,
+                    help="the camera's frame rate [Hz] (pre-flight checks it)")
+    rr.add_argument("--tank-calibration", type=Path, default=None,
+                    help="tank calibration YAML (frog-vision calibrate-tank)")
+    rr.add_argument("--tag-offset", type=Path, default=None,
+                    help="tag-to-body offset file (frog-vision tag-offset); without it the tracker's default, warned")
+    rr.add_argument("--start-tolerance", type=float, default=0.05,
+                    help="pre-flight: largest distance from the robot to the path's start [m]")
+    rr.add_argument("--preflight-timeout", type=float, default=20.0, help="longest wait of each pre-flight check [s]")
+    rr.add_argument("--domain", type=int, default=None,
+                    help="ROS domain id of the real run (default: one no other run on this machine holds)")
+    rr.add_argument("--tag-lost-timeout", type=float, default=3.0, help="stop when no tag pose for this long [s]")
     gg = ap.add_argument_group("the graph (frog_twin/config/frog_graph.yaml)")
     gg.add_argument("--print-graph", action="store_true",
                     help="print the equivalent 'ros2 run' command lines of --mode and exit (nothing is started)")
@@ -402,8 +482,15 @@ def main(argv=None) -> int:
                                              "waypoint_file"))
     ap.set_defaults(period=HARDWARE_PERIOD_S)
     args = ap.parse_args(argv)
+    real = args.robot_port is not None or args.camera is not None or args.mode == "real"
+    if real:
+        prepared = _prepare_real(ap, args)
+        if prepared is not None:
+            return prepared
     if args.print_graph:
         return print_graph(args)
+    if real:
+        return main_real(ap, args)
     replaying = args.replay is not None or args.replay_all is not None
     if args.duration is None and not replaying:
         args.duration = 150.0
