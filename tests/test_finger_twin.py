@@ -51,3 +51,22 @@ def test_twin_follows_L_through_the_whole_chain(ros_domain, tmp_path):
     assert len(sp) == 55 and len(ends) == int(changed.sum())
     assert np.allclose(np.rint(np.array(ends) * STEPS_PER_M), q[changed], atol=1e-6)
     assert m["recording_message_counts"]["/finger/tendon_setpoints"] == 55
+
+
+def test_real_board_preflight(ros_domain, launch, serial_pair, tmp_path):
+    """softkin-twin --port checks the board before anything moves: an emulated board passes, a silent port fails."""
+    import time
+    link = tmp_path / "marlin_pty"
+    launch("marlin_emulator", params={"port_link": str(link)}).wait_for_log("emulated Marlin board", 60)
+    deadline = time.monotonic() + 30
+    while not link.exists() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    r = _run(["--port", str(link), "--preflight-only"], ros_domain.env, 60)
+    assert r.returncode == 0, r.stdout + r.stderr
+    for name in ("handshake", "position", "limits", "zero"):
+        assert f"pre-flight {name}" in r.stdout and "FAIL" not in r.stdout, r.stdout
+    assert "Marlin 2.1.2" in r.stdout
+    _, silent = serial_pair
+    r = _run(["--port", silent, "--preflight-only"], ros_domain.env, 60)
+    assert r.returncode == 2 and "did not answer M115 with ok" in r.stderr, r.stdout + r.stderr
+    assert "nothing was moved" in r.stderr

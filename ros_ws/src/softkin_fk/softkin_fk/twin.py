@@ -261,6 +261,28 @@ def recording_counts(folder: Path) -> dict:
     return counts
 
 
+def board_preflight(args) -> list[str]:
+    """Check the board at ``args.port`` before any node starts; the failures' messages."""
+    import serial
+
+    from .core.board_check import check_board
+    from .core.stepper import CableMotorMap
+    drv = load_graph(GRAPH_FILE, "real")["stepper_driver"].parameters
+    m = CableMotorMap(min_pull=drv["min_pull"], max_pull=drv["max_pull"])
+    to_units = m.steps_per_metre / m.steps_per_unit
+    try:
+        io = serial.Serial(args.port, 115200, timeout=0.1)
+    except (serial.SerialException, OSError) as exc:
+        return [f"cannot open the board's port {args.port}: {exc}"]
+    try:
+        checks = check_board(io, args.port, m.axes, (m.min_pull * to_units, m.max_pull * to_units), args.zero)
+    finally:
+        io.close()
+    for c in checks:
+        print(f"  pre-flight {c.name:9s} {'ok  ' if c.ok else 'FAIL'} {c.message}", flush=True)
+    return [c.message for c in checks if not c.ok]
+
+
 def build_parser():
     p = argparse.ArgumentParser(prog="softkin-twin", description=__doc__.split("\n")[0],
                                 epilog=__doc__.split("Examples\n--------\n")[1],
@@ -275,7 +297,12 @@ def build_parser():
                    help="a cable at rest that bending would stretch is held taut by its motor (default)")
     p.add_argument("--no-hold-rest-cables", dest="hold_rest_cables", action="store_false",
                    help="the core's model: such a cable stays slack (the curves were placed in it)")
-    p.add_argument("--port", default=None, help="a real Marlin board's serial port instead of the emulator")
+    p.add_argument("--port", default=None, help="a real Marlin board's serial port instead of the emulator "
+                   "(pre-flight: M115/ok handshake, M114 position, M211 soft endstops, the zero)")
+    p.add_argument("--zero", choices=("declared", "home"), default="declared",
+                   help="with --port: the cables are at rest now (declared, G92 by the driver) or home the board "
+                        "(G28, needs endstops)")
+    p.add_argument("--preflight-only", action="store_true", help="with --port: run the board's pre-flight and exit")
     p.add_argument("--domain", type=int, default=None,
                    help="ROS domain id (default: one no other run on this machine holds)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -291,6 +318,17 @@ def main(argv=None) -> int:
         return 2
     if not 0.0 < args.cable_speed <= 1.0 or args.lam_mm <= 0:
         print("softkin-twin: error: --cable-speed must be in (0, 1] m/s and --lam-mm positive", file=sys.stderr)
+        return 2
+    if args.port:
+        failed = board_preflight(args)
+        if failed:
+            print("softkin-twin: pre-flight failed, nothing was moved:\n" + "\n".join(f"  - {m}" for m in failed),
+                  file=sys.stderr)
+            return 2
+        if args.preflight_only:
+            return 0
+    elif args.preflight_only:
+        print("softkin-twin: error: --preflight-only checks a real board: give --port", file=sys.stderr)
         return 2
     out = Path(args.out or os.path.join("runs", time.strftime("twin_%Y%m%d_%H%M%S")))
     if list((out / "recording").glob("*.mcap")):

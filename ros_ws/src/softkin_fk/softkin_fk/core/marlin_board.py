@@ -7,7 +7,8 @@ What it does, as far as the finger's driver uses Marlin:
   ``ok`` with it); accepted commands are answered ``ok``;
 * ``G0/G1`` (absolute or relative, ``F`` modal, axis units as set by ``steps_per_unit``),
   ``G21``, ``G90``, ``G91``, ``G92``, ``M110``, ``M114``, ``M400``, ``M410``, ``M18``/``M84``,
-  ``M17``; anything else: ``echo:Unknown command: "<cmd>"`` and ``ok``;
+  ``M17``, ``M115`` (firmware report), ``M211`` (soft endstops: off, like a board without
+  endstops whose zero the host declares); anything else: ``echo:Unknown command: "<cmd>"`` and ``ok``;
 * motion: a planner of ``buffer_size`` moves executed one after another, each a straight
   line in step space at its feedrate (no acceleration ramps: a move of length d at F takes
   exactly ``60 d / F`` s); the ``ok`` of a move waits while the planner is full and the ``ok``
@@ -33,6 +34,9 @@ from .marlin import format_position, parse_host_line
 
 BANNER = ["start", "echo:Marlin 2.1.2 (softkin_fk emulator)", "echo: Last Updated: emulated | Author: softkin_fk",
           "echo:Free Memory: 4096  PlannerBufferBytes: 1024"]
+
+FIRMWARE_REPORT = ("FIRMWARE_NAME:Marlin 2.1.2 (softkin_fk emulator) SOURCE_CODE_URL:github.com/MarlinFirmware/Marlin "
+                   "PROTOCOL_VERSION:1.0 MACHINE_TYPE:softkin finger EXTRUDER_COUNT:0")
 
 
 @dataclasses.dataclass
@@ -254,6 +258,11 @@ class MarlinBoard:
             self.absolute = False
         elif code == 'M114':
             self._out.append(self.position_report())
+        elif code == 'M115':
+            self._out.append(FIRMWARE_REPORT)
+        elif code == 'M211':
+            zeros = ' '.join(f'{ax}0.00' for ax in self.axes)
+            self._out.append(f'echo:Soft endstops: Off   Min:  {zeros}   Max:  {zeros}')
         elif code == 'M400':
             if self.moves:
                 self._waiting = ('m400', cmd)
