@@ -27,6 +27,19 @@ from ros_harness import GraphProbe, NodeProcess, acquire_domain, open_pty_pair, 
 os.environ["ROS_PYTHON_CHECK_FIELDS"] = "1"
 
 TOOLS = Path(__file__).parent / "tools"
+FROG_GRAPH = Path(__file__).resolve().parents[1] / "ros_ws" / "src" / "frog_twin" / "frog_twin" / "config" / \
+    "frog_graph.yaml"
+
+
+def frog_graph_node(name: str, mode: str = "sim", sim_time: bool = False, **params):
+    """Node ``name`` of the frog's graph file (the twin's and the real run's), with ``params`` over it.
+
+    System tests that start a part of the graph take its nodes from the one file; without a
+    simulator there is no /clock, so ``use_sim_time`` is off unless ``sim_time``.
+    """
+    from soft_robot_common.graph import load_graph
+    overrides = {name: {**({} if sim_time else {"use_sim_time": None}), **params}}
+    return load_graph(FROG_GRAPH, mode, overrides)[name]
 
 
 @pytest.hookimpl(hookwrapper=True, tryfirst=True)
@@ -52,12 +65,15 @@ def launch(ros_domain, tmp_path, request):
     """Start an executable (on PATH, or a script in tests/tools) as a node process.
 
     ``launch(exe, *args, params=None, remap=None, node_name=None, env=None, name=None,
-    preexec_fn=None)`` returns a :class:`NodeProcess`.
+    preexec_fn=None)`` returns a :class:`NodeProcess`; ``exe`` may be a graph node
+    (:func:`frog_graph_node`), whose parameters and remaps ``params`` and ``remap`` extend.
     """
     started: list[NodeProcess] = []
 
-    def _launch(exe: str, *args: str, params=None, remap=None, node_name=None, env=None,
+    def _launch(exe, *args: str, params=None, remap=None, node_name=None, env=None,
                 name=None, preexec_fn=None, cwd=None) -> NodeProcess:
+        if not isinstance(exe, str):          # a soft_robot_common.graph.GraphNode: its executable, parameters, remaps
+            exe, params, remap = exe.executable, {**exe.parameters, **(params or {})}, {**exe.remaps, **(remap or {})}
         argv = [exe, *args]
         if (TOOLS / exe).is_file():
             argv = [sys.executable, str(TOOLS / exe), *args]

@@ -15,6 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
+from conftest import frog_graph_node
 from std_srvs.srv import Trigger
 
 pytestmark = pytest.mark.system
@@ -54,13 +55,13 @@ class Diag:
 def start_pair(launch, probe, tmp_path, bridge_params=None, emulator_params=None):
     link = str(tmp_path / "robot_tty")
     log = tmp_path / "emulator_lines.csv"
-    emu = launch("robot_emulator", params={"link_path": link, "command_log": str(log), "seed": 1,
-                                           **(emulator_params or {})})
+    emu = launch(frog_graph_node("robot_emulator", link_path=link, command_log=str(log), seed=1,
+                                 **(emulator_params or {})))
     emu.wait_for_log("emulated relay on", timeout=30)
     quiet = (emulator_params or {}).get("imu_rate_hz", 20.0) == 0
     # a relay that sends no lines would be "stalled" and refuse commands: no stall timeout then
-    bridge = launch("bridge_node", params={"port": link, "settle_s": 0.1, **({"stall_timeout_s": 0.0} if quiet else {}),
-                                           **(bridge_params or {})})
+    bridge = launch(frog_graph_node("bridge_node", port=link, settle_s=0.1,
+                                    **({"stall_timeout_s": 0.0} if quiet else {}), **(bridge_params or {})))
     bridge.wait_for_log("link ready", timeout=30)
     probe.wait_for_subscriber("/frog/primitive", timeout=20)
     return emu, bridge, log
@@ -446,6 +447,37 @@ def test_shutdown_between_front_and_rear_sends_no_rear(launch, probe, tmp_path):
     assert [line for _, line in h_lines(rows)] == ["h 1 0"]
     assert not [r for r in rows if r[2].startswith("error")]        # no partial line on the wire
     assert emu.stop() == 0
+
+
+def test_frog_stop_cancels_the_pending_pulse_and_latches_until_cleared(launch, probe, tmp_path):
+    from soft_robot_interfaces.msg import Primitive
+    from std_msgs.msg import Empty
+    emu, bridge, log = start_pair(launch, probe, tmp_path, bridge_params={"pulse_ms": 300},
+                                  emulator_params={"imu_rate_hz": 0.0})
+    pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
+    stop = probe.node.create_publisher(Empty, "/frog/stop", QOS)
+    probe.wait_for_subscriber("/frog/stop")
+    probe.spin_for(1.0)
+    publish_primitive(probe, pub, "B")          # front now, rear 300 ms later
+    end = time.monotonic() + 3
+    while not h_lines(read_log(log)) and time.monotonic() < end:
+        time.sleep(0.005)
+    stop.publish(Empty())
+    bridge.wait_for_log(r"stop received on /frog/stop: 1 pending pulse\(s\) cancelled", timeout=5)
+    time.sleep(0.6)
+    assert [line for _, line in h_lines(read_log(log))] == ["h 1 0"]      # the rear pair never went out
+    publish_primitive(probe, pub, "A")          # refused while stopped
+    bridge.wait_for_log(r"refused: primitive A: stopped by frog/stop \(call ~/clear_emergency\)", timeout=5)
+    assert trigger(probe, "/bridge_node/clear_emergency").success
+    bridge.wait_for_log("stop cleared", timeout=5)
+    t_clear = time.time()
+    probe.spin_for(0.5)
+    publish_primitive(probe, pub, "A")
+    end = time.monotonic() + 5
+    while not h_lines(read_log(log), after=t_clear) and time.monotonic() < end:
+        time.sleep(0.01)
+    assert [line for _, line in h_lines(read_log(log), after=t_clear)] == ["h 1 0"]
+    assert bridge.stop() == 0 and emu.stop() == 0
 
 
 def test_parameters_described_and_a_device_that_appears_later(launch, probe, tmp_path):

@@ -121,3 +121,35 @@ def test_bad_parameters_exit_with_a_message(launch, params, message):
     node = launch("planner_node", params=params)
     assert node.wait(60) == 2
     assert "fatal configuration error" in node.log_text() and message in node.log_text()
+
+
+def test_frog_stop_stops_deciding_at_once(launch, probe, library):
+    """/frog/stop (std_msgs/Empty), the run's one stop: the planner goes idle and publishes I until ~/start."""
+    from soft_robot_interfaces.msg import PlannerStatus, Primitive
+    from std_msgs.msg import Empty
+    node = launch("planner_node", params={"library_file": str(library), "period": 0.5,
+                                          "path_type": "line", "odom_topic": "/test/odom"})
+    prims, status = [], []
+    probe.node.create_subscription(Primitive, "/frog/primitive", prims.append, QOS)
+    probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
+    odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
+    stop = probe.node.create_publisher(Empty, "/frog/stop", QOS)
+    node.wait_for_log("following a line path", timeout=60)
+    probe.wait_for_subscriber("/frog/stop", timeout=20)
+
+    def feed(seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            odom_pub.publish(_odom(0.05, 0.03, 0.0))
+            probe.spin_for(0.05)
+    feed(1.5)
+    assert any(s.state == PlannerStatus.STATE_FOLLOWING for s in status), [s.message for s in status]
+    stop.publish(Empty())
+    node.wait_for_log("stop received on /frog/stop", timeout=5)
+    feed(0.6)                 # the decision already under way may still go out; then only I
+    prims.clear()
+    status.clear()
+    feed(1.5)
+    assert prims and all(p.name == "I" for p in prims)
+    assert status and all(s.state == PlannerStatus.STATE_IDLE for s in status)
+    assert node.stop() == 0
