@@ -283,9 +283,13 @@ def _read_swim(path: Path):
     if not path.is_file():
         raise UsageError(f"{path}: no such file")
     if path.suffix == ".mcap":
-        from frog_logger.core.log_files import read_messages
+        from mcap.reader import make_reader
+        from mcap_ros2.decoder import DecoderFactory
         rows = []
-        for _, _, m in read_messages(path, topics=["/frog/pose"]):
+        with open(path, "rb") as fh:
+            messages = [m for _, _, _, m in make_reader(fh, decoder_factories=[DecoderFactory()])
+                        .iter_decoded_messages(topics=["/frog/pose"])]
+        for m in messages:
             q = m.pose.orientation
             rows.append([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, m.pose.position.x, m.pose.position.y,
                          math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))])

@@ -62,3 +62,56 @@ def test_cli_writes_the_file_the_twin_reads(tmp_path):
     bad = subprocess.run(["frog-vision", "tag-offset", str(tmp_path / "nope.csv")], capture_output=True, text=True,
                          timeout=60)
     assert bad.returncode == 2 and "nope.csv" in bad.stderr
+
+
+POSE_STAMPED = """std_msgs/Header header
+geometry_msgs/Pose pose
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+================================================================================
+MSG: geometry_msgs/Pose
+Point position
+Quaternion orientation
+================================================================================
+MSG: geometry_msgs/Point
+float64 x
+float64 y
+float64 z
+================================================================================
+MSG: geometry_msgs/Quaternion
+float64 x 0
+float64 y 0
+float64 z 0
+float64 w 1
+"""
+
+
+def test_cli_reads_the_trackers_pose_from_an_mcap(tmp_path):
+    from mcap_ros2.writer import Writer
+    offset = (0.0034, -0.002, math.radians(-4.0))
+    t, tag = straight_swim(offset, seed=5)
+    measured = compose(tag, (0.0034, 0.0, 0.0))
+    f = tmp_path / "run.mcap"
+    with open(f, "wb") as fh:
+        w = Writer(fh)
+        schema = w.register_msgdef("geometry_msgs/msg/PoseStamped", POSE_STAMPED)
+        for ti, (x, y, yaw) in zip(t, measured):
+            ns = int(round((100.0 + ti) * 1e9))
+            w.write_message("/frog/pose", schema, {
+                "header": {"stamp": {"sec": ns // 10**9, "nanosec": ns % 10**9}, "frame_id": "tank"},
+                "pose": {"position": {"x": x, "y": y, "z": 0.0},
+                         "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}}},
+                log_time=ns, publish_time=ns)
+        w.finish()
+    out = tmp_path / "offset.yaml"
+    r = subprocess.run(["frog-vision", "tag-offset", str(f), "-o", str(out)], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    params = read_tag_offset(out)
+    assert abs(params["offset_yaw"] - offset[2]) < math.radians(0.5) and abs(params["offset_y"] - offset[1]) < 0.001
