@@ -159,3 +159,83 @@ def test_preflight_silent_port(video, library, ros_domain, serial_pair, tmp_path
     err = _preflight_failure(_real_args(video, device, library, tmp_path / "o", ros_domain.domain_id,
                                         preflight_timeout=8), ros_domain.env)
     assert "'Central: Q' line(s)" in err or "link to" in err
+
+
+def test_print_graph_shows_both_modes_ros2_run_lines(tmp_path):
+    sim = subprocess.run(["frog-twin", "--print-graph", "--path", "line", "--library", "lib.npz"],
+                         capture_output=True, text=True, timeout=120)
+    assert sim.returncode == 0, sim.stderr
+    lines = [ln for ln in sim.stdout.splitlines() if ln.startswith("ros2 run")]
+    assert [ln.split()[2:4] for ln in lines] == [
+        ["frog_logger", "recorder"], ["frog_sim", "sim_node"], ["frog_vision", "camera_sim"],
+        ["frog_vision", "tracker_node"], ["frog_twin", "image_preview"], ["frog_bridge", "robot_emulator"],
+        ["frog_bridge", "bridge_node"], ["frog_planner", "planner_node"]]
+    assert all("use_sim_time:=true" in ln for ln in lines if " sim_node " not in ln)
+    offset = tmp_path / "tag_offset.yaml"
+    offset.write_text("offset_x: 0.0031\noffset_y: -0.0004\noffset_yaw: 0.0977\n")
+    real = subprocess.run(["frog-twin", "--print-graph", "--robot-port", "/dev/ttyACM0", "--camera", "/dev/video0",
+                           "--tag-offset", str(offset), "--path", "sine", "--library", "lib.npz"],
+                          capture_output=True, text=True, timeout=120)
+    assert real.returncode == 0, real.stderr
+    lines = [ln for ln in real.stdout.splitlines() if ln.startswith("ros2 run")]
+    assert [ln.split()[3] for ln in lines] == ["recorder", "camera_node", "tracker_node", "image_preview",
+                                               "bridge_node", "planner_node"]
+    assert not any("use_sim_time" in ln for ln in lines)
+    tracker = next(ln for ln in lines if " tracker_node " in ln)
+    assert "-p offset_yaw:=0.0977" in tracker and "-p offset_y:=-0.0004" in tracker
+    assert "-p port:=/dev/ttyACM0" in next(ln for ln in lines if " bridge_node " in ln)
+    assert "-p path_type:=sine" in lines[-1]
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("offset_yaw: 9\n")
+    r = subprocess.run(["frog-twin", "--print-graph", "--robot-port", "/dev/ttyACM0", "--camera", "/dev/video0",
+                        "--tag-offset", str(bad)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "needs offset_x, offset_y, offset_yaw" in r.stderr, r.stderr
+
+
+def _start_emulator(launch, tmp_path):
+    link = tmp_path / "robot_tty"
+    launch("robot_emulator", params={"link_path": str(link), "command_log": str(tmp_path / "commands.csv")},
+           remap=EMULATED_IMU)
+    deadline = time.monotonic() + 60
+    while not link.exists():
+        assert time.monotonic() < deadline, "the emulator's pty did not appear"
+        time.sleep(0.1)
+    return link
+
+
+def test_lost_tag_stops_the_run_and_reports(library, launch, ros_domain, tmp_path):
+    short = _render(tmp_path / "short", lambda t: -0.233 + 0.004 * t, 16.0)    # the camera stops after 16 s
+    link = _start_emulator(launch, tmp_path)
+    out = tmp_path / "real"
+    r = subprocess.run(["frog-twin", *map(str, _real_args(short, link, library, out, ros_domain.domain_id,
+                                                          tag_lost_timeout=2))],
+                       env=ros_domain.env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert "stopped (tag lost for more than 2 s)" in r.stdout, r.stdout[-2000:]
+    (m,) = json.loads((out / "metrics.json").read_text())
+    assert m["stop_reason"] == "tag lost for more than 2 s" and (out / "line.png").exists()
+
+
+def test_ctrl_c_stops_the_run_and_reports(video, library, launch, ros_domain, tmp_path):
+    import signal
+    link = _start_emulator(launch, tmp_path)
+    out = tmp_path / "real"
+    proc = _frog_twin(_real_args(video, link, library, out, ros_domain.domain_id), ros_domain.env, 300)
+    try:
+        deadline = time.monotonic() + 200
+        while not (tmp_path / "commands.csv").exists() or "h " not in (tmp_path / "commands.csv").read_text():
+            assert proc.poll() is None and time.monotonic() < deadline, "no 'h' line reached the port"
+            time.sleep(0.2)
+        t_stop = time.time()
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stdout[-3000:] + stderr[-3000:]
+    assert "stopped (Ctrl-C)" in stdout
+    with open(tmp_path / "commands.csv") as fh:
+        late = [r for r in csv.DictReader(fh) if r["line"].startswith("h ")
+                and float(r["wall_time_s"]) > t_stop + PERIOD]
+    assert not late, late
+    assert json.loads((out / "metrics.json").read_text())[0]["stop_reason"] == "Ctrl-C"
