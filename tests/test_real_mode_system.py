@@ -204,16 +204,19 @@ def _start_emulator(launch, tmp_path):
 
 
 def test_lost_tag_stops_the_run_and_reports(library, launch, ros_domain, tmp_path):
+    """Also runs sim_node beside as the reference prediction (--reference-sim), outside the loop."""
     short = _render(tmp_path / "short", lambda t: -0.233 + 0.004 * t, 16.0)    # the camera stops after 16 s
     link = _start_emulator(launch, tmp_path)
     out = tmp_path / "real"
-    r = subprocess.run(["frog-twin", *map(str, _real_args(short, link, library, out, ros_domain.domain_id,
-                                                          tag_lost_timeout=2))],
+    args = _real_args(short, link, library, out, ros_domain.domain_id, tag_lost_timeout=2) + ["--reference-sim"]
+    r = subprocess.run(["frog-twin", *map(str, args)],
                        env=ros_domain.env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert "stopped (tag lost for more than 2 s)" in r.stdout, r.stdout[-2000:]
     (m,) = json.loads((out / "metrics.json").read_text())
     assert m["stop_reason"] == "tag lost for more than 2 s" and (out / "line.png").exists()
+    ref = m["reference_prediction"]
+    assert ref["n"] > 50 and ref["mean_distance_to_tracked_m"] < 0.2, ref
 
 
 def test_ctrl_c_stops_the_run_and_reports(video, library, launch, ros_domain, tmp_path):

@@ -27,6 +27,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from soft_robot_common.graph import load_graph
 
 from frog_twin.core import twin_report
@@ -78,6 +80,17 @@ def real_graph(args, name: str, out: Path, path_settings, settings):
         "planner_node": {"library_file": str(args.library), **as_dict(settings), **as_dict(path_settings)},
     }
     return load_graph(getattr(args, "graph_file", None) or GRAPH_FILE, "real", overrides)
+
+
+def reference_sim_node(args, pose):
+    """sim_node beside the real robot, never in the loop: it starts at the tracked pose, on the
+    system clock, and executes the planner's primitives; its frog/sim/odom is the prediction the
+    report sets beside the tracked trajectory (nothing in the loop reads it)."""
+    from frog_twin.twin import GRAPH_FILE
+    x, y, heading = (float(v) for v in pose)
+    return load_graph(GRAPH_FILE, "sim", {"sim_node": {
+        "publish_clock": False, "real_time_factor": 1.0, "execute_primitives": True, "initial_x": x,
+        "initial_y": y, "initial_heading": heading, "limb_strength_sd": 0.0, "odom_alias_topic": ""}})["sim_node"]
 
 
 class RealWatch:
@@ -292,6 +305,8 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
             failed.append("interrupted (Ctrl-C) during the pre-flight")
         if failed:
             raise PreflightError(failed)
+        if args.reference_sim:
+            procs.append(reference_sim_node(args, watch.poses[-1][1:]).start(domain.env, out))
         recorded = ("/frog/odom", "/frog/primitive", "/frog/planner/status")
         watch.base.wait(lambda: watch.base.subscribed("recorder", recorded), 30,
                         "the recorder subscribed to the loop's topics", procs)
@@ -340,8 +355,19 @@ def real_report(args, name, out, settings, path_settings, reason, wall, checks) 
     if not files:
         raise RuntimeError(f"no recording in {out / 'recording'}; see {out}/recorder.log")
     rec = read_twin_recording(files)
+    predicted = rec.truth         # the reference sim_node's frog/sim/odom, if it ran
     rec.truth = rec.tracked       # no ground truth on the real robot: the camera's track is the trajectory
     metrics = twin_report.run_metrics(rec, name)
+    if len(predicted) > 1 and rec.path is not None:
+        from frog_twin.core.metrics import distance_to_polyline
+        start = metrics["start_time_s"]
+        p = predicted[predicted[:, 0] >= start]
+        k = np.searchsorted(rec.tracked[:, 0], p[:, 0]).clip(0, len(rec.tracked) - 1)
+        metrics["reference_prediction"] = {
+            "n": int(len(p)), "mean_distance_to_path_m": float(distance_to_polyline(p[:, 1:3], rec.path).mean())
+            if len(p) else None,
+            "mean_distance_to_tracked_m": float(np.hypot(*(p[:, 1:3] - rec.tracked[k, 1:3]).T).mean())
+            if len(p) else None, "source": "sim_node beside the robot (--reference-sim), not in the loop"}
     metrics["vision"] = {"n": int(len(rec.tracked)), "rate_hz": float(
         len(rec.tracked) / max(rec.tracked[-1, 0] - rec.tracked[0, 0], 1e-9)) if len(rec.tracked) > 1 else 0.0}
     metrics.update(mode="real", trajectory="tracked (camera + tracker); no ground truth", stop_reason=reason,

@@ -467,6 +467,9 @@ def main(argv=None) -> int:
                     help="tag-to-body offset file (frog-vision tag-offset); without it the tracker's default, warned")
     rr.add_argument("--start-tolerance", type=float, default=0.05,
                     help="pre-flight: largest distance from the robot to the path's start [m]")
+    rr.add_argument("--reference-sim", action="store_true",
+                    help="run sim_node beside the robot as a reference prediction (from the tracked start pose, "
+                         "executing the planner's primitives; never in the loop)")
     rr.add_argument("--preflight-timeout", type=float, default=20.0, help="longest wait of each pre-flight check [s]")
     rr.add_argument("--domain", type=int, default=None,
                     help="ROS domain id of the real run (default: one no other run on this machine holds)")
