@@ -123,18 +123,32 @@ def _preflight_failure(args, env):
     r = subprocess.run(["frog-twin", *map(str, args)], env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 2, r.stdout[-2000:] + r.stderr[-2000:]
     assert "pre-flight failed, nothing was actuated" in r.stderr, r.stderr[-2000:]
+    print(r.stdout + r.stderr)            # shown with -s: the messages a user sees
     return r.stderr
 
 
-def test_preflight_no_tag(library, launch, ros_domain, tmp_path):
+def test_preflight_no_tag(library, launch, ros_domain, probe, tmp_path):
+    from nav_msgs.msg import Odometry
     empty = _render(tmp_path / "empty", lambda t: 0.0, 12.0, x=3.0)     # the robot far outside the view
     link = tmp_path / "robot_tty"
-    launch("robot_emulator", params={"link_path": str(link)}, remap=EMULATED_IMU)
+    # without a tag there is no frog/odom: the emulated IMU gets a heading of its own, so only the tag is broken
+    launch("robot_emulator", params={"link_path": str(link)}, remap={"frog/sim/odom": "/test/heading"})
+    pub = probe.node.create_publisher(Odometry, "/test/heading", 10)
     while not link.exists():
         time.sleep(0.1)
-    err = _preflight_failure(_real_args(empty, link, library, tmp_path / "o", ros_domain.domain_id,
-                                        preflight_timeout=8), ros_domain.env)
-    assert "tag not detected" in err
+    proc = _frog_twin(_real_args(empty, link, library, tmp_path / "o", ros_domain.domain_id, preflight_timeout=8),
+                      ros_domain.env, 300)
+    odom = Odometry()
+    odom.pose.pose.orientation.w = 1.0
+    deadline = time.monotonic() + 240
+    while proc.poll() is None and time.monotonic() < deadline:
+        pub.publish(odom)
+        probe.spin_for(0.1)
+    stdout, stderr = proc.communicate(timeout=60)
+    print(stdout + stderr)
+    assert proc.returncode == 2 and "pre-flight failed, nothing was actuated" in stderr, stdout + stderr
+    failed = [ln for ln in stderr.splitlines() if ln.startswith("  - ")]
+    assert len(failed) == 1 and "tag not detected" in failed[0], stderr
 
 
 def test_preflight_wrong_image_size(video, library, launch, ros_domain, tmp_path):
@@ -145,13 +159,13 @@ def test_preflight_wrong_image_size(video, library, launch, ros_domain, tmp_path
     for f in ("frames.mp4", "camera_info.yaml"):
         os.symlink(video / f, bad / f)
     (bad / "tank_calibration.yaml").write_text(yaml.safe_dump(tank))
-    link = tmp_path / "robot_tty"
-    launch("robot_emulator", params={"link_path": str(link)}, remap=EMULATED_IMU)
-    while not link.exists():
-        time.sleep(0.1)
+    link = _start_emulator(launch, tmp_path)
     err = _preflight_failure(_real_args(bad, link, library, tmp_path / "o", ros_domain.domain_id,
                                         preflight_timeout=8), ros_domain.env)
     assert "is for 1280x720 images but the camera delivers 640x480 frames" in err
+    # everything else passed, and still nothing was heated: the port heard only the pulse length
+    lines = [r["line"] for r in csv.DictReader(open(tmp_path / "commands.csv"))]
+    assert lines and not [ln for ln in lines if ln.startswith("h ")], lines
 
 
 def test_preflight_silent_port(video, library, ros_domain, serial_pair, tmp_path):

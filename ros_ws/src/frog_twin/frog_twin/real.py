@@ -192,7 +192,7 @@ def preflight(args, watch: RealWatch, procs, path, timeout: float = PREFLIGHT_TI
         rate = (n - 1) / RATE_WINDOW_S
         ok = rate >= RATE_FRACTION * fps
         checks.append(Check("camera", ok, f"camera {args.camera}: {rate:.1f} frames/s "
-                                          f"({'at' if ok else 'below'} {RATE_FRACTION:.0%} of its {fps:g} Hz)"))
+                                          f"({'at least' if ok else 'below'} {RATE_FRACTION:.0%} of its {fps:g} Hz)"))
     # 2. image sizes of the calibration files
     frame_size = (watch.frames[-1][1], watch.frames[-1][2]) if watch.frames else None
     camera = None
