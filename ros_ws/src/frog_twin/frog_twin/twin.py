@@ -401,7 +401,7 @@ def print_graph(args) -> int:
     except ValueError as exc:
         print(f"frog-twin: error: {exc}", file=sys.stderr)
         return 2
-    out = args.out or Path("runs") / "main"
+    out = args.out or Path("runs") / ("main" if mode == "sim" else "real")
     args.library = args.library or Path("runs") / "library" / "frog_default.npz"
     path_settings = placed_path_settings(args.path_settings, args.path)
     try:
@@ -418,6 +418,8 @@ def print_graph(args) -> int:
     print(f"# (every node also reads its section with: --ros-args --params-file {GRAPH_FILE})")
     for line in graph.ros2_run_lines():
         print(line)
+    print("# planner_node then waits for: ros2 service call /planner_node/start std_srvs/srv/Trigger"
+          + ("" if mode == "sim" else "   (stop: ros2 topic pub --once /frog/stop std_msgs/msg/Empty)"))
     return 0
 
 
