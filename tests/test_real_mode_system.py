@@ -256,3 +256,25 @@ def test_ctrl_c_stops_the_run_and_reports(video, library, launch, ros_domain, tm
                 and float(r["wall_time_s"]) > t_stop + PERIOD]
     assert not late, late
     assert json.loads((out / "metrics.json").read_text())[0]["stop_reason"] == "Ctrl-C"
+
+
+def test_ctrl_c_during_preflight_ends_at_once_without_actuation(video, library, ros_domain, serial_pair, tmp_path):
+    import signal
+    _, device = serial_pair                 # a silent port: the link check would wait the whole timeout
+    proc = _frog_twin(_real_args(video, device, library, tmp_path / "o", ros_domain.domain_id,
+                                 preflight_timeout=120), ros_domain.env, 300)
+    try:
+        assert proc.stdout.readline().startswith("real robot:")
+        deadline = time.monotonic() + 60
+        while not (tmp_path / "o" / "line" / "planner_node.log").exists():
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.1)
+        time.sleep(3.0)
+        t_int = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 2 and "interrupted (Ctrl-C) during the pre-flight" in stderr, stdout + stderr
+    assert time.monotonic() - t_int < 40, "the pre-flight did not end at Ctrl-C"

@@ -112,6 +112,7 @@ class RealWatch:
         self.link_state = None
         self.link_message = None
         self.stops = 0
+        self.interrupted = []     # Ctrl-C (the SIGINT handler of run_real)
         # camera_node publishes one camera_info per frame (with its size): the rate without the pixels
         node.create_subscription(CameraInfo, "/camera/camera_info", self._on_frame, 50)
         node.create_subscription(PoseStamped, "/frog/pose", self._on_pose, 10)
@@ -175,7 +176,7 @@ def preflight(args, watch: RealWatch, procs, path, timeout: float = PREFLIGHT_TI
 
     def wait(pred, limit=timeout):
         end = t0 + limit
-        while not pred() and time.monotonic() < end and not died():
+        while not pred() and time.monotonic() < end and not died() and not watch.interrupted:
             watch.spin(0.05)
         return pred()
 
@@ -289,7 +290,7 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
         domain = acquire_domain()
     procs = []
     watch = RealWatch(domain)
-    interrupted = []
+    interrupted = watch.interrupted
     previous = signal.signal(signal.SIGINT, lambda *_: interrupted.append("Ctrl-C"))
     reason = None
     t_start = None
