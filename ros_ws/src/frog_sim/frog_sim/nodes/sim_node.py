@@ -61,7 +61,10 @@ _NODE_PARAMS = [
     Param("gait_duration_s", 0.0, "stop the gait after this long [s]; 0 = forever", min=0.0, max=1e6),
     Param("limb_strength_sd", 0.0, "relative spread of the four limbs' kick strengths: each limb's factor is "
           "drawn once from N(1, sd^2) with seed (real limbs differ); 0 = nominal", min=0.0, max=0.5),
-    Param("seed", 0, "random seed of the limb strengths", min=0, max=2**31 - 1),
+    Param("kick_strength_sd", 0.0, "relative spread of each firing's kick: every fired limb kicks with its strength "
+          "times a factor drawn from N(1, sd^2) per firing (real kicks vary from one to the next); 0 = none",
+          min=0.0, max=0.5),
+    Param("seed", 0, "random seed of the limb strengths and the kick variability", min=0, max=2**31 - 1),
     Param("duration_s", 0.0, "stop simulating (keep publishing the last state) after this simulated time "
           "[s]; 0 = run forever", min=0.0, max=1e7),
 ]
@@ -108,6 +111,8 @@ class SimNode(Node):
                 rng = np.random.default_rng(p["seed"])
                 factors = np.clip(1.0 + p["limb_strength_sd"] * rng.standard_normal(len(LIMB_NAMES)), 0.2, 2.0)
                 self.sim.set_limb_strength(dict(zip(LIMB_NAMES, factors.tolist())))
+            if p["kick_strength_sd"] > 0:
+                self.sim.set_kick_variability(p["kick_strength_sd"], seed=p["seed"] + 1)
             if p["gait_frequency_hz"] > 0:
                 self.sim.set_gait(p["gait_frequency_hz"], p["gait_phase_offset"],
                                   duration=p["gait_duration_s"] or None)
