@@ -1,0 +1,79 @@
+"""What a ROS user hits from the command line (issue 23): bad messages, blocking faults,
+colliding device paths, start-up errors and signals, all through the nodes' real interfaces.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import pytest
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_srvs.srv import Trigger
+
+pytestmark = pytest.mark.system
+
+QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def _image(width, height, stamp_s, fill=0):
+    from sensor_msgs.msg import Image
+    msg = Image(width=width, height=height, encoding="bgr8", step=width * 3)
+    msg.data = bytes([fill]) * (width * height * 3)
+    msg.header.stamp.sec = int(stamp_s)
+    msg.header.stamp.nanosec = int(round((stamp_s % 1) * 1e9)) % 1_000_000_000
+    return msg
+
+
+def trigger(probe, service, timeout=15.0):
+    client = probe.node.create_client(Trigger, service)
+    probe.wait_for_service(client, timeout=15)
+    return probe.call(client, Trigger.Request(), timeout=timeout)
+
+
+# -- image_preview (issue 23.3, 23.6) ---------------------------------------------------------
+
+def test_image_preview_refuses_an_empty_image_and_stays_up(launch, probe):
+    from sensor_msgs.msg import CompressedImage, Image
+    node = launch("image_preview")
+    node.wait_for_log("JPEG copy of", timeout=30)
+    out = []
+    probe.node.create_subscription(CompressedImage, "/camera/preview/compressed", out.append, QOS)
+    pub = probe.node.create_publisher(Image, "/camera/image_raw", QoSProfile(depth=2))
+    probe.wait_for_subscriber("/camera/image_raw")
+    probe.spin_for(0.3)
+    pub.publish(_image(0, 0, 10.0))
+    node.wait_for_log("empty image", timeout=10)
+    pub.publish(_image(64, 48, 11.0))
+    probe.spin_until(lambda: len(out) >= 1, 10, "a preview of a good frame after the empty one")
+    assert node.running()
+
+
+def test_image_preview_delivers_rate_hz_from_a_30fps_camera(launch, probe):
+    """0.9 MB frames at 30 fps in, ``rate_hz`` 5 out (within 10 %)."""
+    from sensor_msgs.msg import CompressedImage, Image
+    node = launch("image_preview", params={"rate_hz": 5.0, "scale": 0.5})
+    node.wait_for_log("JPEG copy of", timeout=30)
+    out = []
+    probe.node.create_subscription(CompressedImage, "/camera/preview/compressed", out.append, QOS)
+    pub = probe.node.create_publisher(Image, "/camera/image_raw", QoSProfile(depth=2))
+    probe.wait_for_subscriber("/camera/image_raw")
+    probe.wait_for_topic("/camera/preview/compressed")
+    probe.spin_for(0.5)
+    frame = _image(640, 480, 0.0, fill=90)
+    t0 = time.monotonic()
+    n_frames = 0
+    duration = 6.0
+    while time.monotonic() - t0 < duration:
+        n_frames += 1
+        stamp = 100.0 + n_frames / 30.0            # camera stamps: a 30 fps grid
+        frame.header.stamp.sec = int(stamp)
+        frame.header.stamp.nanosec = int((stamp - int(stamp)) * 1e9)
+        pub.publish(frame)
+        probe.spin_until(lambda: time.monotonic() - t0 >= n_frames / 30.0, 1.0)
+    probe.spin_for(1.0)
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in out]
+    span = n_frames / 30.0
+    rate = len(stamps) / span
+    assert rate == pytest.approx(5.0, rel=0.1), (len(stamps), n_frames, span)
