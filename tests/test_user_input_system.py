@@ -77,3 +77,22 @@ def test_image_preview_delivers_rate_hz_from_a_30fps_camera(launch, probe):
     span = n_frames / 30.0
     rate = len(stamps) / span
     assert rate == pytest.approx(5.0, rel=0.1), (len(stamps), n_frames, span)
+
+
+# -- robot_emulator faults off the executor (issue 23.4) -------------------------------------
+
+def test_emulator_garbage_without_a_reader_does_not_block_the_node(launch, probe, tmp_path):
+    from rcl_interfaces.srv import GetParameters
+    emu = launch("robot_emulator", params={"link_path": str(tmp_path / "tty"), "imu_rate_hz": 0.0})
+    emu.wait_for_log("emulated relay on", timeout=30)
+    t0 = time.monotonic()
+    assert trigger(probe, "/robot_emulator/inject_garbage", timeout=5.0).success
+    getter = probe.node.create_client(GetParameters, "/robot_emulator/get_parameters")
+    probe.wait_for_service(getter, timeout=5)
+    reply = probe.call(getter, GetParameters.Request(names=["garbage_lines"]), timeout=5.0)
+    assert reply.values[0].integer_value == 200
+    assert time.monotonic() - t0 < 8.0
+    emu.wait_for_log(r"wrote \d+ garbage lines of 200 \(the device is not being read", timeout=15)
+    assert trigger(probe, "/robot_emulator/inject_garbage", timeout=5.0).success
+    emu.send(signal.SIGINT)                       # honoured while the writer waits
+    assert emu.wait(8.0) == 0

@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import queue
 import select
 import sys
 import threading
@@ -78,6 +79,8 @@ class RobotEmulator(Node):
             raise ConfigurationError(f"link_path {link!r}: folder does not exist")
         seed = None if p["seed"] < 0 else p["seed"]
         self.rng = np.random.default_rng(seed)
+        # the fault writer's own stream (a Generator is not shared between threads)
+        self._garbage_rng = np.random.default_rng(None if seed is None else [seed, 1])
         self.ble = BleLinkModel(p["ble_latency_s"], p["ble_interval_s"], p["loss_rate"], self.rng)
         self.firmware = RobotFirmware(p["initial_pulse_ms"])
         self.framer = LineFramer(4096)
@@ -122,6 +125,11 @@ class RobotEmulator(Node):
             raise ConfigurationError(f"cannot open the emulated device: {exc}") from exc
         self._thread = threading.Thread(target=self._reader, name="pty_reader", daemon=True)
         self._thread.start()
+        # Faults that write a lot (garbage) wait for the reader of the pty: never inside an
+        # executor callback, where they would block services, parameters and shutdown.
+        self._faults: queue.Queue = queue.Queue()
+        self._fault_thread = threading.Thread(target=self._fault_worker, name="fault_writer", daemon=True)
+        self._fault_thread.start()
         where = path if p["device"] else f"{link} -> {path}"
         self.get_logger().info(f"emulated relay on {where}; BLE {p['ble_latency_s'] * 1e3:g} ms + "
                                f"U(0, {p['ble_interval_s'] * 1e3:g}) ms, loss {p['loss_rate']:g}, IMU "
@@ -264,17 +272,43 @@ class RobotEmulator(Node):
 
     def on_garbage(self, request, response):
         n = self.cfg["garbage_lines"]
-        written = 0
-        for i in range(n):
-            written += self.device.write_all(garbage_line(self.rng, i))
-        self.get_logger().warn(f"fault: wrote {n} garbage lines ({written} bytes)")
-        response.success, response.message = True, f"{n} lines, {written} bytes"
+        if not self._faults.empty():
+            response.success, response.message = False, "garbage injection already under way"
+            return response
+        self._faults.put(n)
+        self.get_logger().warn(f"fault: writing {n} garbage lines (in the background)")
+        response.success, response.message = True, f"writing {n} garbage lines"
         return response
+
+    # seconds a garbage line may wait for the reader; the first line that cannot be written
+    # within it ends the injection (nobody reads the device)
+    GARBAGE_WRITE_TIMEOUT_S = 2.0
+
+    def _fault_worker(self) -> None:
+        while self._running:
+            try:
+                n = self._faults.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            written = lines = 0
+            for i in range(n):
+                if not self._running:
+                    break
+                line = garbage_line(self._garbage_rng, i)
+                done = self.device.write_all(line, timeout=self.GARBAGE_WRITE_TIMEOUT_S)
+                written += done
+                if done < len(line):
+                    break
+                lines += 1
+            self._faults.task_done()
+            note = "" if lines == n else f" of {n} (the device is not being read; the rest dropped)"
+            self.get_logger().warn(f"fault: wrote {lines} garbage lines{note} ({written} bytes)")
 
     def close(self) -> None:
         self._running = False
         os.write(self._wake_w, b"x")
         self._thread.join(2.0)
+        self._fault_thread.join(2.0)
         self.device.unplug()
         if self._log_file is not None:
             self._log_file.close()
