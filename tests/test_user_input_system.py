@@ -96,3 +96,45 @@ def test_emulator_garbage_without_a_reader_does_not_block_the_node(launch, probe
     assert trigger(probe, "/robot_emulator/inject_garbage", timeout=5.0).success
     emu.send(signal.SIGINT)                       # honoured while the writer waits
     assert emu.wait(8.0) == 0
+
+
+# -- emulator device paths (issue 23.5) and start-up errors (issue 23.7) ----------------------
+
+def _fatal_line(proc):
+    lines = [line for line in proc.log_text().splitlines() if "fatal configuration error" in line]
+    assert len(lines) == 1 and "Traceback" not in proc.log_text(), proc.log_text()[-2000:]
+    return lines[0]
+
+
+@pytest.mark.parametrize("exe, param, base", [("robot_emulator", "link_path", "/tmp/frog_robot_tty"),
+                                              ("marlin_emulator", "port_link", "/tmp/softkin_marlin")])
+def test_emulator_paths_per_namespace_and_never_taken_over(launch, probe, tmp_path, exe, param, base):
+    ns = f"t23_{os.getpid()}"
+    first = launch(exe, remap={"__ns": f"/{ns}"}, name="first")
+    first.wait_for_log(f"on {base}_{ns}", timeout=30)      # the namespace's own default path
+    link = f"{base}_{ns}"
+    target = os.readlink(link)
+    second = launch(exe, remap={"__ns": f"/{ns}"}, name="second")
+    assert second.wait(30) == 2
+    line = _fatal_line(second)
+    assert f"{param} '{link}' is in use by another live process (pid {first.pid}," in line, line
+    assert os.readlink(link) == target and first.running()       # the first keeps its device
+    explicit = str(tmp_path / "dev")
+    third = launch(exe, params={param: explicit}, name="third")
+    third.wait_for_log(f"on {explicit}", timeout=30)
+    assert third.stop() == 0
+    fourth = launch(exe, params={param: explicit}, name="fourth")   # free again once the owner exited
+    fourth.wait_for_log(f"on {explicit}", timeout=30)
+    assert first.stop() == 0 and not os.path.lexists(link)
+    os.unlink(f"{link}.lock")
+
+
+@pytest.mark.parametrize("params, expected", [
+    ({"port_link": "/nonexistent_23/board"}, "port_link '/nonexistent_23/board': folder"),
+    ({"transcript": "/nonexistent_23/t.txt"}, "transcript '/nonexistent_23/t.txt': No such file"),
+])
+def test_marlin_emulator_missing_folders_exit_2_with_one_line(launch, tmp_path, params, expected):
+    params = {"port_link": str(tmp_path / "m"), **params}
+    proc = launch("marlin_emulator", params=params)
+    assert proc.wait(30) == 2
+    assert expected in _fatal_line(proc)

@@ -13,6 +13,7 @@ request: ``~/inject_emergency``, ``~/unplug`` (and ``~/replug``), ``~/inject_gar
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import os
 import queue
@@ -27,7 +28,7 @@ from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, Param, PathClaim, declare_parameters, namespaced_path, run_node
 from std_srvs.srv import Trigger
 
 from frog_bridge.core.emulator import (
@@ -38,7 +39,9 @@ from frog_bridge.core.protocol import (
 from frog_bridge.core.pty_device import OpenedDevice, PtyDevice
 
 PARAMS = [
-    Param("link_path", "/tmp/frog_robot_tty", "stable path linked to the emulated device (the bridge's port)"),
+    Param("link_path", "/tmp/frog_robot_tty", "stable path linked to the emulated device (the bridge's port); "
+          "default /tmp/frog_robot_tty in the root namespace, /tmp/frog_robot_tty_<ns> in /<ns>; refused if "
+          "another live emulator holds it"),
     Param("device", "", "open this existing serial device instead of creating a pty (link_path unused)"),
     Param("ble_latency_s", DEFAULT_BLE_LATENCY_S, "fixed relay + BLE + firmware delay per line [s]",
           min=0.0, max=1.0),
@@ -65,7 +68,8 @@ class RobotEmulator(Node):
 
     def __init__(self, **kwargs):
         super().__init__("robot_emulator", **kwargs)
-        p = declare_parameters(self, PARAMS)
+        p = declare_parameters(self, [dataclasses.replace(r, default=namespaced_path(r.default, self.get_namespace()))
+                                      if r.name == "link_path" else r for r in PARAMS])
         self.cfg = p
         from soft_robot_interfaces.msg import LimbActivation
         self._LimbActivation = LimbActivation
@@ -77,6 +81,7 @@ class RobotEmulator(Node):
             raise ConfigurationError(f"link_path {link!r} exists and is not a symbolic link; refusing to replace it")
         elif not os.path.isdir(os.path.dirname(os.path.abspath(link))):
             raise ConfigurationError(f"link_path {link!r}: folder does not exist")
+        self._claim = None if p["device"] else PathClaim(link, "link_path")
         seed = None if p["seed"] < 0 else p["seed"]
         self.rng = np.random.default_rng(seed)
         # the fault writer's own stream (a Generator is not shared between threads)
@@ -310,6 +315,8 @@ class RobotEmulator(Node):
         self._thread.join(2.0)
         self._fault_thread.join(2.0)
         self.device.unplug()
+        if self._claim is not None:
+            self._claim.release()
         if self._log_file is not None:
             self._log_file.close()
         self.get_logger().info(f"emulator stopped: {self.counts}")

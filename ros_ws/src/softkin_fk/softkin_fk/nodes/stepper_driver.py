@@ -19,6 +19,8 @@ reconnects, re-initialises and restores the last reported position with ``G92``.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import threading
 import time
 
@@ -28,14 +30,15 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, Param, declare_parameters, namespaced_path, run_node
 from std_srvs.srv import Trigger
 
 from ..core.marlin import GcodeSender, format_axes, parse_reply
 from ..core.stepper import CableMotorMap
 
 PARAMS = [
-    Param("port", "/tmp/softkin_marlin", "serial device of the Marlin board (e.g. /dev/ttyACM0)"),
+    Param("port", "/tmp/softkin_marlin", "serial device of the Marlin board (e.g. /dev/ttyACM0); default "
+          "marlin_emulator's link in this namespace: /tmp/softkin_marlin in /, /tmp/softkin_marlin_<ns> in /<ns>"),
     Param("baud", 115200, "serial baud rate", min=1200, max=4000000),
     Param("joints", ["cable_0", "cable_1", "cable_2"], "cable (joint) names of the setpoints, one per axis"),
     Param("axes", ["X", "Y", "Z"], "Marlin axis letter of each cable"),
@@ -66,7 +69,10 @@ class StepperDriver(Node):
 
     def __init__(self):
         super().__init__(self.NODE_NAME)
-        p = self.p = declare_parameters(self, PARAMS, on_change=self._on_change)
+        p = self.p = declare_parameters(self, [dataclasses.replace(r, default=namespaced_path(r.default,
+                                                                                        self.get_namespace()))
+                                               if r.name == "port" else r for r in PARAMS],
+                                        on_change=self._on_change)
         self.map = CableMotorMap(joints=list(p["joints"]), axes=list(p["axes"]), pulley_radius=p["pulley_radius"],
                                  steps_per_rev=p["steps_per_rev"], microsteps=p["microsteps"],
                                  steps_per_unit=p["steps_per_unit"], min_pull=p["min_pull"], max_pull=p["max_pull"],
