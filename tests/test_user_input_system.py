@@ -138,3 +138,13 @@ def test_marlin_emulator_missing_folders_exit_2_with_one_line(launch, tmp_path, 
     proc = launch("marlin_emulator", params=params)
     assert proc.wait(30) == 2
     assert expected in _fatal_line(proc)
+
+
+@pytest.mark.parametrize("exe, param, value", [("sim_node", "odom_alias_topic", "bad name"),
+                                               ("planner_node", "odom_topic", "1abc"),
+                                               ("tracker_node", "kick_topic", "frog//sent")])
+def test_an_invalid_topic_name_exits_2_with_one_line(launch, exe, param, value):
+    proc = launch(exe, params={param: value})
+    assert proc.wait(60) == 2
+    line = _fatal_line(proc)
+    assert f"{param}={value!r} is not a valid topic name" in line, line

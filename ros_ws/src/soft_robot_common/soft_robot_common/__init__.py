@@ -3,7 +3,8 @@
 from .clock_watch import SimClockWatch
 from .device_paths import PathClaim, namespaced_path
 from .node_main import run_node
-from .parameters import ConfigurationError, Param, declare_parameters, params_from_dataclass, undeclared_overrides
+from .parameters import (ConfigurationError, Param, declare_parameters, params_from_dataclass, topic_name_problem,
+                         undeclared_overrides)
 
-__all__ = ["ConfigurationError", "Param", "PathClaim", "SimClockWatch", "namespaced_path", "declare_parameters", "params_from_dataclass",
-           "run_node", "undeclared_overrides"]
+__all__ = ["ConfigurationError", "Param", "PathClaim", "SimClockWatch", "declare_parameters", "namespaced_path",
+           "params_from_dataclass", "run_node", "topic_name_problem", "undeclared_overrides"]

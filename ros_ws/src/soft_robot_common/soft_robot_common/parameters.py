@@ -26,6 +26,30 @@ _INT_LIMIT = 2 ** 62          # an int64 range end that means "no bound"
 _FLOAT_LIMIT = 1e300          # likewise for doubles (finite, so the descriptor prints as a number)
 
 
+def topic_name_problem(name: str) -> str | None:
+    """Why ``name`` is not a valid (relative or absolute) ROS topic name, or None.
+
+    The rule rcl applies when a publisher or subscription is created, checked before, so a
+    bad name is a one-line configuration error rather than a traceback.
+    """
+    from rclpy.expand_topic_name import expand_topic_name
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+    try:
+        validate_full_topic_name(expand_topic_name(name, "node", "/"))
+    except Exception as exc:          # rclpy raises ValueError or InvalidTopicNameException
+        text = str(exc).splitlines()[0]
+        text = text.split(", at /")[0]                          # drop the C source location
+        text = text.replace(f"topic name {name!r} is invalid: ", "").replace("Invalid topic name: ", "")
+        return f"is not a valid topic name ({text})"
+    return None
+
+
+def _is_topic_param(name: str) -> bool:
+    """Parameters named ``*_topic`` (one name) or ``topics``/``*_topics`` (a list) hold topic names."""
+    leaf = name.rsplit(".", 1)[-1]
+    return leaf.endswith("_topic") or leaf == "topic" or leaf == "topics" or leaf.endswith("_topics")
+
+
 class ConfigurationError(ValueError):
     """A parameter value that makes the node's job impossible (fatal at start-up: exit 2)."""
 
@@ -35,7 +59,9 @@ class Param:
     """One node parameter: name, default (its type is the parameter's type), description.
 
     ``min``/``max`` bound numbers (inclusive), ``choices`` lists the allowed strings, and
-    ``live`` makes the parameter writable while the node runs (otherwise read-only).
+    ``live`` makes the parameter writable while the node runs (otherwise read-only). A
+    parameter named ``*_topic`` (a string) or ``topics``/``*_topics`` (a list) must hold
+    valid topic names (empty = none).
     """
 
     name: str
@@ -66,6 +92,11 @@ class Param:
                 return f"{self.name}={value!r} is above its maximum {self.max!r}"
         if self.choices is not None and value not in self.choices:
             return f"{self.name}={value!r} is not one of {', '.join(map(repr, self.choices))}"
+        if kind in (str, list) and _is_topic_param(self.name):
+            for topic in ([value] if kind is str else value):
+                problem = topic_name_problem(topic) if topic else None
+                if problem:
+                    return f"{self.name}={topic!r} {problem}"
         return None
 
     def descriptor(self, full_name: str) -> ParameterDescriptor:

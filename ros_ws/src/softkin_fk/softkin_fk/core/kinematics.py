@@ -332,5 +332,6 @@ class RobotKinematics:
         """Algorithm 3 on checked waypoints; ``on_waypoint`` may return False to stop (cancel)."""
         s = self.settings
         return follow_trajectory(self.solver, waypoints, self.config_space, marker=self.marker,
-                                 on_waypoint=on_waypoint, lam=check_tolerance(lam, s.lam), i_max=s.i_max, jacobian=s.jacobian,
+                                 on_waypoint=on_waypoint, lam=check_tolerance(lam, s.lam), i_max=s.i_max,
+                                 jacobian=s.jacobian,
                                  direction=s.direction, fk_tol=s.fk_tol)
