@@ -148,3 +148,53 @@ def test_an_invalid_topic_name_exits_2_with_one_line(launch, exe, param, value):
     assert proc.wait(60) == 2
     line = _fatal_line(proc)
     assert f"{param}={value!r} is not a valid topic name" in line, line
+
+
+# -- start-up: signals (issue 23.8), parameters and messages (issue 23.11, 23.13) ------------
+
+def test_sigint_is_honoured_while_kinematics_node_starts(launch):
+    node = launch("kinematics_node", params={"config_samples": 9})     # 9^3 solves: a long start
+    node.wait_for_log("loaded .*configuration samples", timeout=60)
+    t0 = time.monotonic()
+    node.send(signal.SIGINT)
+    assert node.wait(5.0) == 0
+    assert time.monotonic() - t0 < 5.0 and "ready in" not in node.log_text()
+    assert "stopped by signal during start-up" in node.log_text()
+
+
+def test_camera_source_may_be_an_index_and_fatal_lines_name_the_renamed_node(launch):
+    cam = launch("camera_node", params={"source": 0}, node_name="cam7", remap={"__ns": "/rig"})
+    assert cam.wait(30) == 2
+    line = _fatal_line(cam)
+    assert line.startswith("[rig.cam7] fatal configuration error: camera source '0'"), line
+
+
+def test_out_of_range_model_parameter_keeps_its_full_name(launch):
+    sim = launch("sim_node", params={"model.body_drag_normal": 9.0})
+    assert sim.wait(60) == 2
+    assert "model.body_drag_normal=9.0 is above its maximum 5.0" in _fatal_line(sim)
+
+
+def test_descriptions_and_unbounded_integer_ranges_read_sanely(launch, probe, tmp_path):
+    from rcl_interfaces.srv import DescribeParameters, ListParameters
+    emu = launch("robot_emulator", params={"link_path": str(tmp_path / "tty")})
+    sim = launch("sim_node")
+    cam = launch("camera_node", params={"source": str(tmp_path / "none.mp4"), "retry": True})
+    for proc, node in ((emu, "/robot_emulator"), (sim, "/sim_node"), (cam, "/camera_node")):
+        probe.wait_for_node(node, timeout=60)
+
+    def describe(node, names):
+        client = probe.node.create_client(DescribeParameters, f"{node}/describe_parameters")
+        probe.wait_for_service(client, timeout=30)
+        return {d.name: d for d in probe.call(client, DescribeParameters.Request(names=names), timeout=60).descriptors}
+
+    seed = describe("/robot_emulator", ["seed"])["seed"]
+    assert seed.integer_range[0].to_value == 2 ** 31 - 1
+    lister = probe.node.create_client(ListParameters, "/sim_node/list_parameters")
+    probe.wait_for_service(lister, timeout=30)
+    names = list(probe.call(lister, ListParameters.Request(prefixes=["model"]), timeout=90).result.names)
+    assert len(names) >= 31
+    for name, d in describe("/sim_node", names).items():
+        assert "FrogParameters." not in d.description and len(d.description) > 20, (name, d.description)
+    retry = describe("/camera_node", ["retry_period_s"])["retry_period_s"].description
+    assert "between attempts" in retry
