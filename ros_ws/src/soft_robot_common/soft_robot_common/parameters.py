@@ -22,7 +22,7 @@ _TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEG
           float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
 _TYPE_WORDS = {bool: "a boolean (true/false)", int: "an integer", float: "a floating-point number (write 3.0, not 3)",
                str: "a string", list: "a list of strings"}
-_INT_LIMIT = 2 ** 62          # an int64 range end that means "no bound"
+_INT_LIMIT = 2 ** 31 - 1      # an integer without a bound on one side: +-2147483647 (sizes, counts, seeds)
 _FLOAT_LIMIT = 1e300          # likewise for doubles (finite, so the descriptor prints as a number)
 
 
@@ -61,7 +61,8 @@ class Param:
     ``min``/``max`` bound numbers (inclusive), ``choices`` lists the allowed strings, and
     ``live`` makes the parameter writable while the node runs (otherwise read-only). A
     parameter named ``*_topic`` (a string) or ``topics``/``*_topics`` (a list) must hold
-    valid topic names (empty = none).
+    valid topic names (empty = none). ``ints_as_text`` lets a string parameter be given as
+    an integer (``-p source:=0``: YAML reads 0 as a number); the node sees its text.
     """
 
     name: str
@@ -71,6 +72,7 @@ class Param:
     max: float | None = None
     choices: tuple | None = None
     live: bool = False
+    ints_as_text: bool = False     # a string that may also be given as an integer (a device index)
 
     @property
     def kind(self) -> type:
@@ -81,11 +83,15 @@ class Param:
         kind = self.kind
         ok_type = (isinstance(value, kind) and not (kind is int and isinstance(value, bool))
                    or kind is list and isinstance(value, (list, tuple)))
+        if self.ints_as_text and isinstance(value, int) and not isinstance(value, bool):
+            value, ok_type = str(value), True
         if not ok_type:
             return f"{self.name}={value!r} must be {_TYPE_WORDS[kind]}"
         if kind in (int, float):
             if kind is float and not math.isfinite(value):
                 return f"{self.name}={value!r} must be finite"
+            if kind is int and not -_INT_LIMIT <= value <= _INT_LIMIT:
+                return f"{self.name}={value!r} is outside +-{_INT_LIMIT}"
             if self.min is not None and value < self.min:
                 return f"{self.name}={value!r} is below its minimum {self.min!r}"
             if self.max is not None and value > self.max:
@@ -105,7 +111,8 @@ class Param:
         if self.choices is not None:
             text += f" (one of: {', '.join(map(str, self.choices))})"
         d = ParameterDescriptor(name=full_name, type=_TYPES.get(kind, ParameterType.PARAMETER_STRING_ARRAY),
-                                description=text, read_only=not self.live)
+                                description=text, read_only=not self.live,
+                                dynamic_typing=self.ints_as_text)
         if kind is int and (self.min is not None or self.max is not None):
             d.integer_range = [IntegerRange(
                 from_value=int(self.min) if self.min is not None else -_INT_LIMIT,
@@ -167,10 +174,13 @@ def declare_parameters(node, table, prefix: str = "",
         except ParameterException as exc:
             given = node._parameter_overrides.get(full)
             value = given.value if given is not None else None
-            raise ConfigurationError(row.problem(value) or f"{full}: {exc}") from None
+            problem = row.problem(value)
+            raise ConfigurationError(prefix + problem if problem else f"{full}: {exc}") from None
         value = node.get_parameter(full).value
         if isinstance(value, tuple):
             value = list(value)
+        if row.ints_as_text and isinstance(value, int) and not isinstance(value, bool):
+            value = str(value)
         problem = row.problem(value)
         if problem:
             raise ConfigurationError(prefix + problem)
@@ -191,6 +201,8 @@ def declare_parameters(node, table, prefix: str = "",
                 continue
             mine = True
             value = list(p.value) if isinstance(p.value, tuple) else p.value
+            if row.ints_as_text and isinstance(value, int) and not isinstance(value, bool):
+                value = str(value)
             problem = row.problem(value)
             if problem:
                 return SetParametersResult(successful=False, reason=prefix + problem)

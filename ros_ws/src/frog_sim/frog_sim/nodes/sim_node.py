@@ -31,7 +31,7 @@ from soft_robot_common import ConfigurationError, Param, declare_parameters, run
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
-from frog_sim.core.model_parameters import FrogParameters
+from frog_sim.core.model_parameters import PARAMETER_SOURCES, FrogParameters
 from frog_sim.core.schedules import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import DEFAULT_TIME_STEP, ConvergenceError, FrogSimulation
 
@@ -78,9 +78,10 @@ def _model_params(defaults: FrogParameters) -> list:
         lo, hi = f.metadata.get("range", (None, None))
         unit = f.metadata.get("unit", "")
         choices = f.metadata.get("choices")
+        source = PARAMETER_SOURCES.get(f.name, ("", f"FrogParameters.{f.name}"))[1]
         rows.append(Param(f.name, getattr(defaults, f.name),
-                          f"FrogParameters.{f.name}{' [' + unit + ']' if unit not in ('', '-') else ''} (see "
-                          f"frog_sim/core/model_parameters.py)", lo, hi, tuple(choices) if choices else None))
+                          f"{f.name.replace('_', ' ')}{' [' + unit + ']' if unit not in ('', '-') else ''}: "
+                          f"{source}", lo, hi, tuple(choices) if choices else None))
     return rows
 
 

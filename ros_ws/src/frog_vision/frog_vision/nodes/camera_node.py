@@ -21,7 +21,8 @@ from frog_vision.nodes.common import load_camera
 from frog_vision.nodes.messages import array_to_image, camera_info_msg
 
 PARAMS = [
-    Param("source", "/dev/video0", "camera: a device path or index, a video file, or 'realsense'"),
+    Param("source", "/dev/video0", "camera: a device path or index (0 or '0'), a video file, or 'realsense'",
+          ints_as_text=True),
     Param("width", 640, "requested frame width [px]", min=16, max=8192),
     Param("height", 480, "requested frame height [px]", min=16, max=8192),
     Param("fps", 30.0, "requested frame rate [Hz]", min=1.0, max=240.0),
@@ -30,7 +31,8 @@ PARAMS = [
     Param("frame_id", "camera", "frame of the images"),
     Param("loop", False, "restart a video file at its end"),
     Param("retry", False, "keep retrying a source that cannot be opened or stops delivering"),
-    Param("retry_period_s", 2.0, "[s]", min=0.1, max=60.0),
+    Param("retry_period_s", 2.0, "with retry: seconds between attempts to open a camera that failed or was "
+          "lost [s]", min=0.1, max=60.0),
 ]
 
 
