@@ -198,3 +198,85 @@ def test_descriptions_and_unbounded_integer_ranges_read_sanely(launch, probe, tm
         assert "FrogParameters." not in d.description and len(d.description) > 20, (name, d.description)
     retry = describe("/camera_node", ["retry_period_s"])["retry_period_s"].description
     assert "between attempts" in retry
+
+
+# -- non-finite and unstamped odometry (issue 23.9) -------------------------------------------
+
+def _odom(probe, x=0.0, yaw_w=1.0, stamp=True):
+    from nav_msgs.msg import Odometry
+    msg = Odometry()
+    msg.header.frame_id = "tank"
+    if stamp:
+        msg.header.stamp = probe.node.get_clock().now().to_msg()
+    msg.pose.pose.position.x = x
+    msg.pose.pose.orientation.w = yaw_w
+    return msg
+
+
+def test_camera_sim_refuses_nonfinite_and_unstamped_odometry(launch, probe):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import Image
+    cam = launch("camera_sim")
+    probe.wait_for_node("/camera_sim", timeout=60)
+    images, diags = [], []
+    probe.node.create_subscription(Image, "/camera/image_raw", images.append, QoSProfile(depth=2))
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
+    pub = probe.node.create_publisher(Odometry, "/frog/sim/odom", QOS)
+    probe.wait_for_subscriber("/frog/sim/odom")
+    probe.spin_for(0.3)
+    for _ in range(10):
+        pub.publish(_odom(probe, x=float("nan")))
+        probe.spin_for(0.1)
+    cam.wait_for_log(r"frog/sim/odom refused: pose.pose.position.x is nan", timeout=10)
+    for _ in range(30):                              # past the 2 s log throttle
+        pub.publish(_odom(probe, stamp=False))
+        probe.spin_for(0.1)
+    cam.wait_for_log(r"frog/sim/odom refused: header.stamp is zero \(unstamped\)", timeout=10)
+
+    def refusal_reported():
+        return any("refused" in s.message and s.level != b"\x00" for m in diags for s in m.status
+                   if "camera simulator" in s.name)
+    probe.spin_until(refusal_reported, 10, "diagnostics reporting the refusal")
+    assert images == [] and "RuntimeWarning" not in cam.log_text()
+    assert cam.running()
+
+
+def test_robot_emulator_never_streams_nan_quaternions_and_bridge_names_the_bad_number(launch, probe, tmp_path,
+                                                                                      serial_pair):
+    from nav_msgs.msg import Odometry
+    link = str(tmp_path / "tty")
+    emu = launch("robot_emulator", params={"link_path": link, "imu_rate_hz": 50.0})
+    emu.wait_for_log("emulated relay on", timeout=30)
+    fd = os.open(link, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    import tty
+    tty.setraw(fd)
+    pub = probe.node.create_publisher(Odometry, "/frog/sim/odom", QOS)
+    probe.wait_for_subscriber("/frog/sim/odom")
+    received = bytearray()
+
+    def read():
+        try:
+            received.extend(os.read(fd, 65536))
+        except BlockingIOError:
+            pass
+    for _ in range(10):
+        pub.publish(_odom(probe, yaw_w=float("nan")))
+        probe.spin_for(0.1)
+        read()
+    emu.wait_for_log(r"frog/sim/odom refused: pose.pose.orientation.w is nan", timeout=10)
+    assert b"Central: Q" not in received and b"nan" not in received
+    pub.publish(_odom(probe))
+    probe.spin_until(lambda: read() or b"Central: Q 1.0000 0.0000 0.0000 0.0000" in received, 10, "Q lines")
+    os.close(fd)
+
+    controller, path = serial_pair
+    bridge = launch("bridge_node", params={"port": path, "settle_s": 0.1, "stall_timeout_s": 0.0})
+    bridge.wait_for_log("link ready", timeout=30)
+    os.write(controller, b"Central: Q nan 0.0000 0.0000 nan\r\n")
+    bridge.wait_for_log(r"number 1 after Q is non-finite: 'nan'", timeout=10)
+    end = time.monotonic() + 10                      # bad-line logs are throttled
+    while "number 2 after Q is not a number: 'zz'" not in bridge.log_text() and time.monotonic() < end:
+        os.write(controller, b"Central: Q 1.0 zz 0.0 0.0\r\n")
+        time.sleep(0.3)
+    assert "number 2 after Q is not a number: 'zz'" in bridge.log_text()

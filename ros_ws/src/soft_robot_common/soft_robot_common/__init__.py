@@ -2,9 +2,11 @@
 
 from .clock_watch import SimClockWatch
 from .device_paths import PathClaim, namespaced_path
+from .message_checks import message_problem
 from .node_main import run_node
 from .parameters import (ConfigurationError, Param, declare_parameters, params_from_dataclass, topic_name_problem,
                          undeclared_overrides)
 
-__all__ = ["ConfigurationError", "Param", "PathClaim", "SimClockWatch", "declare_parameters", "namespaced_path",
+__all__ = ["ConfigurationError", "Param", "PathClaim", "SimClockWatch", "declare_parameters", "message_problem",
+           "namespaced_path",
            "params_from_dataclass", "run_node", "topic_name_problem", "undeclared_overrides"]

@@ -28,7 +28,8 @@ from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from soft_robot_common import ConfigurationError, Param, PathClaim, declare_parameters, namespaced_path, run_node
+from soft_robot_common import (ConfigurationError, Param, PathClaim, declare_parameters, message_problem,
+                               namespaced_path, run_node)
 from std_srvs.srv import Trigger
 
 from frog_bridge.core.emulator import (
@@ -230,6 +231,12 @@ class RobotEmulator(Node):
         self.get_logger().debug(f"fired {limb_names(fire.limbs)} for {fire.pulse_s * 1e3:g} ms")
 
     def on_odom(self, msg: Odometry) -> None:
+        problem = message_problem(msg, self.get_clock().now().nanoseconds)
+        if problem:
+            self.counts["odom_refused"] = self.counts.get("odom_refused", 0) + 1
+            self.get_logger().warn(f"frog/sim/odom refused: {problem}; the IMU keeps the last good heading",
+                                   throttle_duration_sec=2.0)
+            return
         o = msg.pose.pose.orientation
         yaw = quaternion_yaw(o.w, o.x, o.y, o.z)
         if self.yaw is None:
