@@ -280,3 +280,32 @@ def test_robot_emulator_never_streams_nan_quaternions_and_bridge_names_the_bad_n
         os.write(controller, b"Central: Q 1.0 zz 0.0 0.0\r\n")
         time.sleep(0.3)
     assert "number 2 after Q is not a number: 'zz'" in bridge.log_text()
+
+
+# -- planner_node library errors are clear and fixable live (issue 23.10) --------------------
+
+def test_planner_library_error_is_clear_and_fixed_by_setting_library_file(launch, probe, tmp_path, library):
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    from soft_robot_interfaces.msg import PlannerStatus
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"this is not a library")
+    node = launch("planner_node", params={"library_file": str(bad), "period": 0.3})
+    status = []
+    probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
+    probe.spin_until(lambda: status and status[-1].state == PlannerStatus.STATE_ERROR, 60, "ERROR status")
+    text = node.log_text()
+    assert "allow_pickle" not in text and "allow_pickle" not in status[-1].message
+    assert "not planning: cannot use library" in text and "set library_file to fix it" in status[-1].message
+    setter = probe.node.create_client(SetParameters, "/planner_node/set_parameters")
+    probe.wait_for_service(setter)
+
+    def set_library(path):
+        value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=str(path))
+        return probe.call(setter, SetParameters.Request(parameters=[Parameter(name="library_file", value=value)]))
+    assert set_library(tmp_path / "missing.npz").results[0].successful
+    probe.spin_until(lambda: "missing.npz does not exist" in status[-1].message, 10, "the missing file reported")
+    assert set_library(library).results[0].successful
+    probe.spin_until(lambda: status[-1].state != PlannerStatus.STATE_ERROR, 10, "the error cleared")
+    assert "no odometry" in status[-1].message
+    assert node.running()

@@ -7,8 +7,10 @@ pose in the world frame, twist in the body frame per REP-105), asks
 (relative names: ``__ns`` moves them). The reference path is latched on ``frog/path``. It
 publishes primitive I (no action), says why in the status and logs it when the state
 changes: stopped (``~/stop``), goal reached, odometry missing or older than
-``stale_periods`` periods, or a library that cannot be used. Weights, depth, look-aheads
-and the path can be changed while running (``ros2 param set``).
+``stale_periods`` periods, or a library that cannot be used. Weights, depth, look-aheads,
+the path and ``library_file`` can be changed while running (``ros2 param set``); setting
+``library_file`` (to a new path, or again to the same one after fixing the file) loads it
+anew, so a missing or corrupt library is fixed without a restart.
 """
 
 from __future__ import annotations
@@ -31,7 +33,8 @@ from frog_planner.core.transition_model import TransitionModel
 
 # The node's own settings; the planner's and the path's come from frog_planner.core.settings.
 _NODE_PARAMS = [
-    Param("library_file", "", "motion-primitive library (.npz, docs/motion_library_format.md)"),
+    Param("library_file", "", "motion-primitive library (.npz, docs/motion_library_format.md); live: set it "
+          "(again) to load a new or fixed file", live=True),
     Param("odom_topic", "frog/odom", "odometry input (tracker, or the simulator's ground truth); relative "
           "names resolve in the node's namespace"),
     Param("world_frame", "tank", "frame of the path and the status poses"),
@@ -104,7 +107,9 @@ class PlannerNode(Node):
         self.get_logger().info(
             f"following a {self.path.name} path of {self.path.length:.3f} m, period {self.settings.period} s, "
             f"depth {self.settings.depth}, metric {self.settings.metric}; odometry from "
-            f"{self.resolve_topic_name(p['odom_topic'])}; {'running' if self.running else 'waiting for ~/start'}")
+            f"{self.resolve_topic_name(p['odom_topic'])}; "
+            + (f"not planning: {self.library_error}" if self.library_error
+               else 'running' if self.running else 'waiting for ~/start'))
 
     def load_library(self) -> None:
         """Load the model; on failure log the reason and keep running (publishing I)."""
@@ -121,12 +126,20 @@ class PlannerNode(Node):
                 return
             except (LibraryFormatError, ValueError, OSError) as exc:
                 self.library_error = f"cannot use library {p['library_file']!r}: {exc}"
+        self.library_error += " (set library_file to fix it: ros2 param set <node> library_file <file>)"
         self.get_logger().error(self.library_error + "; publishing primitive I until fixed")
 
     def on_parameters(self, changed: dict) -> None:
         """Apply live changes: planner settings keep the progress, a new path starts over."""
         p = self.cfg
         self.settings = _settings(PlannerSettings, p, _PLANNER_FIELDS)
+        if "library_file" in changed:
+            progress = self.planner.progress if self.planner is not None else 0.0
+            self.model = self.planner = None
+            self.load_library()
+            if self.planner is not None:
+                self.planner.reset(progress)
+            return
         if changed.keys() & _PATH_FIELDS:
             try:
                 self.path = _settings(PathSettings, p, _PATH_FIELDS).build()
