@@ -309,3 +309,27 @@ def test_planner_library_error_is_clear_and_fixed_by_setting_library_file(launch
     probe.spin_until(lambda: status[-1].state != PlannerStatus.STATE_ERROR, 10, "the error cleared")
     assert "no odometry" in status[-1].message
     assert node.running()
+
+
+# -- /diagnostics from every node that can fail (issue 23.12) -------------------------------
+
+def test_diagnostics_from_the_nodes_that_had_none(launch, probe, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+    got = {}
+
+    def on_diag(msg):
+        for s in msg.status:
+            got[s.name.split(":")[0]] = (int.from_bytes(s.level, "little"), s.message)
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, QOS)
+    launch("planner_node", params={"library_file": str(tmp_path / "none.npz")})
+    launch("robot_emulator", params={"link_path": str(tmp_path / "tty")})
+    launch("camera_node", params={"source": str(tmp_path / "none.mp4"), "retry": True})
+    launch("image_preview")
+    launch("marlin_emulator", params={"port_link": str(tmp_path / "board")})
+    want = {"planner_node", "robot_emulator", "camera_node", "image_preview", "marlin_emulator"}
+    probe.spin_until(lambda: want <= got.keys(), 60, f"diagnostics from {want}")
+    assert got["planner_node"][0] == 2 and "none.npz does not exist" in got["planner_node"][1]
+    assert got["camera_node"][0] == 2 and "retrying every 2 s" in got["camera_node"][1]
+    assert got["image_preview"] == (1, "waiting for /camera/image_raw")
+    assert got["robot_emulator"] == (0, "waiting for lines from the bridge")
+    assert got["marlin_emulator"] == (0, "waiting for G-code from the host")

@@ -28,8 +28,8 @@ from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from soft_robot_common import (ConfigurationError, Param, PathClaim, declare_parameters, message_problem,
-                               namespaced_path, run_node)
+from soft_robot_common import (ConfigurationError, NodeDiagnostics, Param, PathClaim, declare_parameters,
+                               message_problem, namespaced_path, run_node)
 from std_srvs.srv import Trigger
 
 from frog_bridge.core.emulator import (
@@ -136,10 +136,24 @@ class RobotEmulator(Node):
         self._faults: queue.Queue = queue.Queue()
         self._fault_thread = threading.Thread(target=self._fault_worker, name="fault_writer", daemon=True)
         self._fault_thread.start()
+        self.diagnostics = NodeDiagnostics(self, "emulated relay", self._diagnostics,
+                                           hardware_id=p["device"] or link)
         where = path if p["device"] else f"{link} -> {path}"
         self.get_logger().info(f"emulated relay on {where}; BLE {p['ble_latency_s'] * 1e3:g} ms + "
                                f"U(0, {p['ble_interval_s'] * 1e3:g}) ms, loss {p['loss_rate']:g}, IMU "
                                f"{p['imu_rate_hz']:g} Hz")
+
+    def _diagnostics(self):
+        from soft_robot_common.diagnostics import OK, WARN
+        values = dict(self.counts, device=self.device.device_path, dropped_bytes=self.device.dropped_bytes,
+                      heading_known=self.yaw is not None)
+        if not self.device.plugged:
+            return WARN, "unplugged (fault injected): waiting for ~/replug or the replug timer", values
+        if time.monotonic() < self.stalled_until:
+            return WARN, "stalled (fault injected)", values
+        if self.counts["lines"] == 0:
+            return OK, "waiting for lines from the bridge", values
+        return OK, "relaying", values
 
     # -- reader thread ----------------------------------------------------------------------
     def _request(self, what: str, arg=None) -> None:

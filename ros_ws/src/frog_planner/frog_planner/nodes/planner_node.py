@@ -23,7 +23,9 @@ from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from soft_robot_common import ConfigurationError, Param, declare_parameters, params_from_dataclass, run_node
+from soft_robot_common import (ConfigurationError, NodeDiagnostics, Param, declare_parameters, params_from_dataclass,
+                               run_node)
+from soft_robot_common.diagnostics import ERROR, OK, WARN
 from std_srvs.srv import Trigger
 
 from frog_planner.core.library_file import LibraryFormatError
@@ -104,6 +106,7 @@ class PlannerNode(Node):
         self._last_state = None
         self.publish_path()
         self.create_timer(self.settings.period, self.decide)
+        self.diagnostics = NodeDiagnostics(self, "planner", self._diagnostics, hardware_id="planner")
         self.get_logger().info(
             f"following a {self.path.name} path of {self.path.length:.3f} m, period {self.settings.period} s, "
             f"depth {self.settings.depth}, metric {self.settings.metric}; odometry from "
@@ -216,6 +219,18 @@ class PlannerNode(Node):
         if age > self.cfg["stale_periods"] * self.settings.period:
             return S.STATE_WAITING, f"odometry is stale ({age:.2f} s old)"
         return None
+
+    def _diagnostics(self):
+        """(level, message, values): ERROR without a usable library, WARN while waiting."""
+        S = self._Status
+        blocked = self._state()
+        level = OK if blocked is None or blocked[0] in (S.STATE_IDLE, S.STATE_GOAL_REACHED) else \
+            ERROR if blocked[0] == S.STATE_ERROR else WARN
+        message = f"following the {self.path.name} path" if blocked is None else blocked[1]
+        values = {"library_file": self.cfg["library_file"], "path": self.path.name,
+                  "progress": float(self.planner.progress) if self.planner is not None else 0.0,
+                  "odometry_topic": self.resolve_topic_name(self.cfg["odom_topic"])}
+        return level, message, values
 
     def _publish(self, primitive_id: int, name: str, state: int, message: str, decision=None) -> None:
         stamp = self.get_clock().now().to_msg()

@@ -24,7 +24,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import CompressedImage, Image
-from soft_robot_common import Param, declare_parameters, run_node
+from soft_robot_common import NodeDiagnostics, Param, declare_parameters, run_node
+from soft_robot_common.diagnostics import OK, WARN
 
 _PARAMS = [
     Param("rate_hz", 5.0, "most frames per second passed on (node clock)", min=0.1, max=120.0, live=True),
@@ -45,25 +46,42 @@ class ImagePreviewNode(Node):
                                  QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE),
                                  qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.next_ns = None       # stamp from which the next frame is passed on
+        self.counts = {"received": 0, "passed": 0, "refused": 0}
+        self._diag_received = 0
+        self.last_refusal = ""
+        self.diagnostics = NodeDiagnostics(self, "preview", self._diagnostics)
         self.get_logger().info(f"JPEG copy of {self.resolve_topic_name('camera/image_raw')} at <= "
                                f"{self.cfg['rate_hz']:g} Hz on {self.resolve_topic_name('camera/preview/compressed')}")
 
+    def _diagnostics(self):
+        new, self._diag_received = self.counts["received"] - self._diag_received, self.counts["received"]
+        values = dict(self.counts, rate_hz=float(self.cfg["rate_hz"]))
+        if new == 0:
+            return WARN, f"waiting for {self.resolve_topic_name('camera/image_raw')}", values
+        if self.counts["passed"] == 0 and self.last_refusal:
+            return WARN, self.last_refusal, values
+        return OK, "passing frames on", values
+
+    def _refuse(self, text: str) -> None:
+        self.counts["refused"] += 1
+        self.last_refusal = text
+        self.get_logger().error(text, throttle_duration_sec=5.0)
+
     def on_image(self, msg: Image) -> None:
+        self.counts["received"] += 1
         stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         period_ns = 1e9 / self.cfg["rate_hz"]
         if self.next_ns is not None and 0 < self.next_ns - stamp_ns <= period_ns:
             return        # (a stamp further back than that: the clock jumped back; start again)
         if msg.encoding not in _ENCODINGS:
-            self.get_logger().error(f"cannot preview encoding {msg.encoding!r} (bgr8, rgb8, mono8)",
-                                    throttle_duration_sec=5.0)
+            self._refuse(f"cannot preview encoding {msg.encoding!r} (bgr8, rgb8, mono8)")
             return
         channels = 1 if msg.encoding == "mono8" else 3
         if msg.width == 0 or msg.height == 0:
-            self.get_logger().error(f"empty image ({msg.width}x{msg.height}) refused", throttle_duration_sec=5.0)
+            self._refuse(f"empty image ({msg.width}x{msg.height}) refused")
             return
         if msg.height * msg.step != len(msg.data) or msg.step < msg.width * channels:
-            self.get_logger().error(f"corrupt image: {msg.width}x{msg.height}, step {msg.step}, "
-                                    f"{len(msg.data)} bytes", throttle_duration_sec=5.0)
+            self._refuse(f"corrupt image: {msg.width}x{msg.height}, step {msg.step}, {len(msg.data)} bytes")
             return
         rows = np.frombuffer(msg.data, np.uint8).reshape(msg.height, msg.step)
         img = rows[:, :msg.width * channels].reshape(msg.height, msg.width, channels)
@@ -79,6 +97,7 @@ class ImagePreviewNode(Node):
         out = CompressedImage(header=msg.header, format="jpeg")
         out.data = buf.tobytes()
         self.pub.publish(out)
+        self.counts["passed"] += 1
         # the next frame is due one period after this one's slot on the grid; a source slower
         # than rate_hz (or a gap) restarts the grid at this frame
         due = self.next_ns + period_ns if self.next_ns is not None else stamp_ns + period_ns

@@ -26,7 +26,8 @@ import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from soft_robot_common import ConfigurationError, Param, PathClaim, declare_parameters, namespaced_path, run_node
+from soft_robot_common import (ConfigurationError, NodeDiagnostics, Param, PathClaim, declare_parameters,
+                               namespaced_path, run_node)
 from std_srvs.srv import Trigger
 
 from ..core.marlin_board import MarlinBoard
@@ -83,6 +84,8 @@ class MarlinEmulator(Node):
         self._running = True
         self._thread = threading.Thread(target=self._serve, name="marlin_pty", daemon=True)
         self._thread.start()
+        self.lines_received = 0
+        self.diagnostics = NodeDiagnostics(self, "emulated board", self._diagnostics, hardware_id=p["port_link"])
         self.get_logger().info(f"emulated Marlin board on {p['port_link']} -> {self._device}")
 
     # --- the pty ------------------------------------------------------------------------
@@ -137,6 +140,7 @@ class MarlinEmulator(Node):
                         if self._transcript is not None:
                             self._transcript.write(f"{now:.6f} {line}\n")
                         self.board.receive(line, now)
+                        self.lines_received += 1
                 self.board.tick(now)
                 out = self.board.take_output()
                 ends = self.board.take_completed()
@@ -147,6 +151,16 @@ class MarlinEmulator(Node):
                     pass
             for t_end, steps in ends:   # stamped when the model's move ended, however late the thread woke
                 self.pub_end.publish(self._state(steps, np.zeros(len(steps)), age=time.monotonic() - t_end))
+
+    def _diagnostics(self):
+        from soft_robot_common.diagnostics import OK, WARN
+        values = {"port_link": self.p["port_link"], "device": self._device if self._fd is not None else "",
+                  "lines_received": self.lines_received}
+        if self._fd is None:
+            return WARN, "unplugged (fault injected): waiting for ~/replug", values
+        if self.lines_received == 0:
+            return OK, "waiting for G-code from the host", values
+        return OK, "running", values
 
     # --- publishing ---------------------------------------------------------------------
     def _state(self, steps, speed, age: float = 0.0) -> JointState:
