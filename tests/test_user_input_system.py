@@ -333,3 +333,31 @@ def test_diagnostics_from_the_nodes_that_had_none(launch, probe, tmp_path):
     assert got["image_preview"] == (1, "waiting for /camera/image_raw")
     assert got["robot_emulator"] == (0, "waiting for lines from the bridge")
     assert got["marlin_emulator"] == (0, "waiting for G-code from the host")
+
+
+# -- minor items (issue 23.14) ----------------------------------------------------------------
+
+def test_stepper_driver_reports_a_halted_board_until_it_resets(launch, probe, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import JointState
+    link = str(tmp_path / "marlin")
+    launch("marlin_emulator", params={"port_link": link}).wait_for_log("emulated Marlin board", timeout=30)
+    drv = launch("stepper_driver", params={"port": link, "banner_timeout": 0.3, "reconnect_period": 0.2})
+    drv.wait_for_log("board ready", timeout=30)
+    link_state = []
+
+    def on_diag(msg):
+        link_state.extend((s.level, s.message) for s in msg.status if "Marlin link" in s.name)
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, QOS)
+    pub = probe.node.create_publisher(JointState, "/finger/tendon_setpoints", QOS)
+    probe.wait_for_subscriber("/finger/tendon_setpoints", timeout=20)
+    assert trigger(probe, "/marlin_emulator/inject_error").success       # "Printer halted. kill() called!"
+    drv.wait_for_log(r"board halted \(Error:Printer halted. kill\(\) called!\)", timeout=10)
+    probe.spin_until(lambda: link_state and link_state[-1][1].startswith("halted"), 10, "diagnostics: halted")
+    assert link_state[-1][0] == b"\x02"
+    js = JointState(name=["cable_0", "cable_1", "cable_2"], position=[0.001, 0.0, 0.0])
+    js.header.stamp = probe.node.get_clock().now().to_msg()
+    pub.publish(js)
+    drv.wait_for_log("setpoint refused: link halted", timeout=10)
+    assert trigger(probe, "/marlin_emulator/reset").success
+    probe.spin_until(lambda: link_state and link_state[-1][1] == "ready", 10, "diagnostics: ready after the reset")

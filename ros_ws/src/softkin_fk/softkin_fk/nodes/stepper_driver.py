@@ -82,7 +82,8 @@ class StepperDriver(Node):
             raise ConfigurationError(problem)
         self._lock = threading.Lock()
         self.sender = GcodeSender(window=p["window"])
-        self.state = "disconnected"       # disconnected | connecting | ready | stopped
+        self.state = "disconnected"       # disconnected | connecting | ready | stopped | halted
+        self._halt_line = ""              # Marlin's kill() message while halted (until its reset banner)
         self._ser = None
         n = len(self.map.joints)
         self.commanded = np.zeros(n, np.int64)   # steps of the last queued move (board's plan)
@@ -159,7 +160,7 @@ class StepperDriver(Node):
         with self._lock:
             dropped = self.sender.abort()
             written = False
-            if self._ser is not None and self.state in ("ready", "stopped"):
+            if self._ser is not None and self.state in ("ready", "stopped", "halted"):
                 try:
                     self._ser.write((self.sender.send_unnumbered("M410") + "\n").encode("ascii"))
                     written = True
@@ -303,7 +304,13 @@ class StepperDriver(Node):
                     self._initialise()
             elif r.kind == "error":
                 self.stats["errors"] += 1
-                log.warn(f"board: {line}")
+                if any(w in line for w in ("halted", "kill() called", "stopped due to errors")):
+                    # Marlin's kill(): the board ignores motion until it is reset
+                    self.state, self._halt_line = "halted", line
+                    log.error(f"board halted ({line}): setpoints are refused until the board is reset "
+                              "(reset button, power, or reconnect)")
+                else:
+                    log.warn(f"board: {line}")
             elif r.kind == "echo":
                 if "Unknown command" in line:
                     self.stats["unknown"] += 1
@@ -354,8 +361,11 @@ class StepperDriver(Node):
     # --- diagnostics / shutdown ---------------------------------------------------------
     def _publish_diagnostics(self) -> None:
         level = {"ready": DiagnosticStatus.OK, "connecting": DiagnosticStatus.WARN,
-                 "disconnected": DiagnosticStatus.ERROR}.get(self.state, DiagnosticStatus.WARN)
+                 "disconnected": DiagnosticStatus.ERROR, "halted": DiagnosticStatus.ERROR}.get(self.state,
+                                                                                              DiagnosticStatus.WARN)
         state = "stopped" if self._stopped else self.state
+        if self.state == "halted":
+            state = f"halted ({self._halt_line}): waiting for the board's reset"
         with self._lock:
             vals = dict(port=self.p["port"], link=state, queue_depth=self.sender.queue_depth,
                         in_flight=len(self.sender.in_flight), resends=self.sender.resends, **self.stats)
