@@ -44,6 +44,23 @@ def topic_name_problem(name: str) -> str | None:
     return None
 
 
+def frame_name_problem(name: str) -> str | None:
+    """Why ``name`` is not a usable tf frame id (empty, whitespace, a leading '/'), or None."""
+    if not name:
+        return "must name a frame (it is empty)"
+    if any(c.isspace() for c in name):
+        return "must not contain whitespace"
+    if name.startswith("/"):
+        return "must not start with '/' (tf2 frame ids are plain names)"
+    return None
+
+
+def _is_frame_param(name: str) -> bool:
+    """Parameters named ``*_frame`` or ``frame_id`` hold a tf frame id."""
+    leaf = name.rsplit(".", 1)[-1]
+    return leaf.endswith("_frame") or leaf == "frame_id"
+
+
 def _is_topic_param(name: str) -> bool:
     """Parameters named ``*_topic`` (one name) or ``topics``/``*_topics`` (a list) hold topic names."""
     leaf = name.rsplit(".", 1)[-1]
@@ -61,7 +78,8 @@ class Param:
     ``min``/``max`` bound numbers (inclusive), ``choices`` lists the allowed strings, and
     ``live`` makes the parameter writable while the node runs (otherwise read-only). A
     parameter named ``*_topic`` (a string) or ``topics``/``*_topics`` (a list) must hold
-    valid topic names (empty = none). ``ints_as_text`` lets a string parameter be given as
+    valid topic names (empty = none); one named ``*_frame`` or ``frame_id`` a non-empty frame
+    id. ``ints_as_text`` lets a string parameter be given as
     an integer (``-p source:=0``: YAML reads 0 as a number); the node sees its text.
     """
 
@@ -103,6 +121,10 @@ class Param:
                 problem = topic_name_problem(topic) if topic else None
                 if problem:
                     return f"{self.name}={topic!r} {problem}"
+        if kind is str and _is_frame_param(self.name):
+            problem = frame_name_problem(value)
+            if problem:
+                return f"{self.name}={value!r} {problem}"
         return None
 
     def descriptor(self, full_name: str) -> ParameterDescriptor:

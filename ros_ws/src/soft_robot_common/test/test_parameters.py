@@ -99,4 +99,5 @@ def test_topic_parameters_hold_valid_topic_names():
     for bad in ("bad name", "1abc", "a//b", "a/"):
         assert "is not a valid topic name" in row.problem(bad), bad
     assert "'x y'" in Param("topics", [""], "topics").problem(["/ok", "x y"])
-    assert Param("odom_frame", "odom", "not a topic").problem("bad name") is None
+    assert Param("odom_label", "odom", "not a topic").problem("bad name") is None
+    assert "must name a frame" in Param("world_frame", "tank", "a frame").problem("")

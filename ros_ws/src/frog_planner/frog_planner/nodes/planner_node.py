@@ -170,6 +170,8 @@ class PlannerNode(Node):
             ps.pose.orientation.z, ps.pose.orientation.w = math.sin(h / 2), math.cos(h / 2)
             msg.poses.append(ps)
         self.path_pub.publish(msg)
+        # under use_sim_time the clock reads 0 until /clock arrives: publish again once it runs
+        self._path_unstamped = msg.header.stamp.sec == 0 and msg.header.stamp.nanosec == 0
 
     # -- inputs ------------------------------------------------------------------------------
     def on_odom(self, msg: Odometry) -> None:
@@ -274,6 +276,8 @@ class PlannerNode(Node):
 
     def decide(self) -> None:
         S = self._Status
+        if self._path_unstamped:
+            self.publish_path()
         blocked = self._state()
         if blocked is None:
             pose, velocity = self.odom

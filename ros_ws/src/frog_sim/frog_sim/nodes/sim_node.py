@@ -162,8 +162,10 @@ class SimNode(Node):
 
     def on_parameters(self, changed: dict) -> None:
         if "real_time_factor" in changed:
-            # re-anchor the pacing so the new rate applies from now on, without a jump
+            # re-anchor the pacing so the new rate applies from now on, without a jump (and the
+            # diagnostics' real-time factors, which are measured since the anchor)
             self.wall_start, self.sim_start = time.monotonic(), self.sim.time
+            self.step_wall_s = 0.0
 
     # -- simulation loop -----------------------------------------------------------------
     def _target_time(self) -> float:
@@ -298,6 +300,7 @@ class SimNode(Node):
         self.error = None
         self.next_odom = self.next_shape = 0.0
         self.wall_start, self.sim_start = time.monotonic(), self.sim.time
+        self.step_wall_s = 0.0
         self.publish_state(force=True)
         response.success, response.message = True, "simulation reset to the initial pose"
         self.get_logger().info(f"reset to the initial pose at world time {self.world_time:.3f} s")
