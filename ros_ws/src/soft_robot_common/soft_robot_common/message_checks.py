@@ -7,6 +7,10 @@ with a ``header`` must be stamped (a zero stamp is refused once the node's clock
 returns the first violation as a short text
 naming the field (``"pose.pose.position.x is nan"``), or None. It works on any generated
 ROS message (duck-typed on ``get_fields_and_field_types``), so it needs no rclpy.
+
+The stamp rule is for state estimates (odometry, poses): a command (a primitive, a limb
+pulse, a setpoint) with a zero stamp means "now", as ``ros2 topic pub`` sends it, so command
+callbacks pass ``stamped=False``.
 """
 
 from __future__ import annotations
@@ -75,3 +79,47 @@ def message_problem(msg, now_ns: int | None = None, stamped: bool = True, max_it
     if problem is None and stamped:
         problem = stamp_problem(msg, now_ns)
     return problem
+
+
+class MessageGate:
+    """Applies :func:`message_problem` to a node's inputs and logs each refusal.
+
+    ``gate.refused("frog/primitive", msg)`` is True (and logs ``refused frog/primitive:
+    <field> is nan``) when ``msg`` breaks the rule. Logs are limited to one a second per
+    input and problem (a flood of one bad value logs once a second; a different field or
+    value is logged at once), all counted in :attr:`counts` (``{input: refusals}``).
+    """
+
+    def __init__(self, node, max_items: int = MAX_ITEMS):
+        self.node = node
+        self.max_items = max_items
+        self.counts: dict = {}
+        self._last_log: dict = {}
+
+    def problem(self, msg, stamped: bool = True) -> str | None:
+        now = self.node.get_clock().now().nanoseconds if stamped else None
+        return message_problem(msg, now, stamped, self.max_items)
+
+    def refused(self, what: str, msg, stamped: bool = True) -> bool:
+        problem = self.problem(msg, stamped)
+        if problem is None:
+            return False
+        self.refuse(what, problem)
+        return True
+
+    def refuse(self, what: str, problem: str) -> None:
+        """Count and log (rate-limited per input and problem) a refusal found by the caller."""
+        if self.should_log(what, problem):
+            self.node.get_logger().warn(f"refused {what}: {problem}")
+
+    def should_log(self, what: str, problem: str) -> bool:
+        """Count a refusal; True if it should be logged now (once a second per input and problem)."""
+        import time
+        self.counts[what] = self.counts.get(what, 0) + 1
+        now = time.monotonic()
+        if len(self._last_log) > 1000:
+            self._last_log.clear()
+        if now - self._last_log.get((what, problem), -1e9) < 1.0:
+            return False
+        self._last_log[(what, problem)] = now
+        return True

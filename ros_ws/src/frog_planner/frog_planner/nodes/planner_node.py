@@ -23,8 +23,8 @@ from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from soft_robot_common import (ConfigurationError, NodeDiagnostics, Param, declare_parameters, params_from_dataclass,
-                               run_node)
+from soft_robot_common import (ConfigurationError, MessageGate, NodeDiagnostics, Param, declare_parameters,
+                               params_from_dataclass, run_node)
 from soft_robot_common.diagnostics import ERROR, OK, WARN
 from std_srvs.srv import Trigger
 
@@ -75,6 +75,7 @@ class PlannerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("planner_node", **kwargs)
+        self.gate = MessageGate(self)     # non-finite, unstamped or oversized odometry is refused
         self.cfg = declare_parameters(self, _NODE_PARAMS + _PLANNER_PARAMS + _PATH_PARAMS,
                                       validate=_check_settings, on_change=self.on_parameters)
         p = self.cfg
@@ -175,6 +176,8 @@ class PlannerNode(Node):
 
     # -- inputs ------------------------------------------------------------------------------
     def on_odom(self, msg: Odometry) -> None:
+        if self.gate.refused("odometry", msg):
+            return
         p, q, tw = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
         values = (p.x, p.y, q.x, q.y, q.z, q.w, tw.linear.x, tw.linear.y, tw.angular.z)
         if not all(math.isfinite(v) for v in values):

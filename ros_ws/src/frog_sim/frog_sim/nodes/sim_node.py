@@ -27,7 +27,7 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
@@ -97,6 +97,7 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("sim_node", **kwargs)
+        self.gate = MessageGate(self)     # non-finite, unstamped or oversized commands are refused
         defaults = FrogParameters()
         p = declare_parameters(self, _NODE_PARAMS, on_change=self.on_parameters)
         self.cfg = p
@@ -262,6 +263,8 @@ class SimNode(Node):
 
     # -- commands ------------------------------------------------------------------------
     def on_primitive(self, msg) -> None:
+        if self.gate.refused("frog/primitive", msg, stamped=False):
+            return
         if msg.id >= len(PRIMITIVE_NAMES):
             self.get_logger().error(f"rejected primitive id {msg.id}: out of range 0-8")
             return
@@ -275,6 +278,8 @@ class SimNode(Node):
             self.get_logger().debug(f"primitive {name} at t = {self.sim.time:.3f} s")
 
     def on_activation(self, msg) -> None:
+        if self.gate.refused("frog/limb_activation", msg, stamped=False):
+            return
         limbs = list(msg.limbs)
         if any(i >= len(LIMB_NAMES) for i in limbs) or len(set(limbs)) != len(limbs):
             self.get_logger().error(f"rejected limb activation {limbs}: ids must be distinct "

@@ -30,7 +30,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from soft_robot_common import ConfigurationError, Param, declare_parameters, namespaced_path, run_node
+from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, namespaced_path, run_node
 from std_srvs.srv import Trigger
 
 from ..core.marlin import GcodeSender, format_axes, parse_reply
@@ -69,6 +69,7 @@ class StepperDriver(Node):
 
     def __init__(self):
         super().__init__(self.NODE_NAME)
+        self.gate = MessageGate(self)     # non-finite, unstamped or oversized setpoints are refused
         p = self.p = declare_parameters(self, [dataclasses.replace(r, default=namespaced_path(r.default,
                                                                                         self.get_namespace()))
                                                if r.name == "port" else r for r in PARAMS],
@@ -124,6 +125,11 @@ class StepperDriver(Node):
             self.get_logger().error(f"setpoint refused: {why}")
 
     def _on_setpoint(self, msg: JointState) -> None:
+        problem = self.gate.problem(msg, stamped=False)   # a zero stamp on a command means now
+        if problem:
+            self.stats["refused"] += 1
+            self.gate.refuse("setpoint", problem)
+            return
         joints = self.map.joints
         if len(msg.name) != len(msg.position) or sorted(msg.name) != sorted(joints):
             self._refuse(f"names {list(msg.name)} with {len(msg.position)} positions do not match the joints {joints}")
