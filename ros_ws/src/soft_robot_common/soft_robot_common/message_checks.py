@@ -5,7 +5,7 @@ with a ``header`` must be stamped (a zero stamp is refused once the node's clock
 1 s: at the very start of simulated time 0 is a real time); arrays hold at most
 ``max_items`` elements (byte data such as image pixels excepted). :func:`message_problem`
 returns the first violation as a short text
-naming the field (``"pose.pose.position.x is nan"``), or None. It works on any generated
+naming the field (``"pose.pose.position.x is nan (not finite)"``), or None. It works on any generated
 ROS message (duck-typed on ``get_fields_and_field_types``), so it needs no rclpy.
 
 The stamp rule is for state estimates (odometry, poses): a command (a primitive, a limb
@@ -32,7 +32,7 @@ def nonfinite_field(msg, prefix: str = "", max_items: int = MAX_ITEMS) -> str | 
         path = f"{prefix}{name}"
         if isinstance(value, float):
             if not math.isfinite(value):
-                return f"{path} is {value!r}"
+                return f"{path} is {value!r} (not finite)"
         elif _is_message(value):
             problem = nonfinite_field(value, path + ".", max_items)
             if problem:
@@ -49,7 +49,7 @@ def nonfinite_field(msg, prefix: str = "", max_items: int = MAX_ITEMS) -> str | 
             for i, item in enumerate(value):
                 if isinstance(item, float) or hasattr(item, "dtype") and item.dtype.kind == "f":
                     if not math.isfinite(item):
-                        return f"{path}[{i}] is {float(item)!r}"
+                        return f"{path}[{i}] is {float(item)!r} (not finite)"
                 elif _is_message(item):
                     problem = nonfinite_field(item, f"{path}[{i}].", max_items)
                     if problem:

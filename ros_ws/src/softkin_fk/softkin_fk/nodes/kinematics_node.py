@@ -168,8 +168,11 @@ class KinematicsNode(Node):
     # --- streamed targets -----------------------------------------------------------------
     def _on_target(self, msg: PointStamped) -> None:
         log = self.get_logger()
-        if self.gate.refused("finger/target", msg, stamped=False):
+        problem = self.gate.problem(msg, stamped=False)
+        if problem:
             self._stats["refused"] += 1
+            if self.gate.should_log("finger/target", problem):
+                log.error(f"target refused: {problem}")
             return
         if msg.header.frame_id not in ("", self.frame):
             log.error(f"target refused: frame '{msg.header.frame_id}' is not the base frame '{self.frame}'")
@@ -232,7 +235,11 @@ class KinematicsNode(Node):
 
     def _srv_ik(self, req, res):
         t = req.target
-        problem = self.gate.problem(req, stamped=False)
+        try:
+            check_tolerance(req.tolerance, self.kin.settings.lam)    # its own message first
+            problem = self.gate.problem(req, stamped=False)
+        except (RequestError, ValueError) as exc:
+            problem = str(exc)
         if problem:
             res.success, res.message = False, f"refused: {problem}"
             self.get_logger().error(f"solve_ik {res.message}")
@@ -267,10 +274,6 @@ class KinematicsNode(Node):
 
     # --- action ---------------------------------------------------------------------------
     def _goal(self, goal) -> GoalResponse:
-        problem = self.gate.problem(goal, stamped=False)
-        if problem:
-            self.get_logger().error(f"follow_curve goal rejected: {problem}")
-            return GoalResponse.REJECT
         with self._lock:
             if self._trajectory:
                 self.get_logger().error("follow_curve goal rejected: another goal is running")
@@ -303,6 +306,9 @@ class KinematicsNode(Node):
                 raise RequestError(f"frame '{g.frame_id}' is not the base frame '{self.frame}'")
             lam = check_tolerance(g.tolerance, self.kin.settings.lam)
             P = self.kin.waypoints(g.curve, int(g.n_waypoints), [[w.x, w.y, w.z] for w in g.waypoints])
+            problem = self.gate.problem(g, stamped=False)      # whatever the checks above did not see
+            if problem:
+                raise RequestError(problem)
         except RequestError as exc:
             result.message = f"goal refused: {exc}"
             log.error(f"follow_curve {result.message}")
