@@ -13,6 +13,7 @@ state machine are in :mod:`frog_bridge.core`.
 from __future__ import annotations
 
 import gc
+import math
 import statistics
 import sys
 import time
@@ -167,7 +168,8 @@ class BridgeNode(Node):
 
     def on_limb_command(self, msg) -> None:
         t_in = time.perf_counter()
-        problem = self.gate.problem(msg, stamped=False)   # a zero stamp on a command means now
+        # a zero stamp on a command means now; a bad pulse length gets the scheduler's own message
+        problem = self.gate.problem(msg, stamped=False) if math.isfinite(msg.pulse_duration) else None
         if problem:
             self._refuse_input("limb command", problem)
             return
