@@ -176,13 +176,12 @@ class PlannerNode(Node):
 
     # -- inputs ------------------------------------------------------------------------------
     def on_odom(self, msg: Odometry) -> None:
-        if self.gate.refused("odometry", msg):
-            return
         p, q, tw = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
-        values = (p.x, p.y, q.x, q.y, q.z, q.w, tw.linear.x, tw.linear.y, tw.angular.z)
-        if not all(math.isfinite(v) for v in values):
-            self.get_logger().error("ignored odometry with non-finite values",
-                                    throttle_duration_sec=2.0)
+        problem = self.gate.problem(msg)                 # every float finite, stamped (one rule)
+        if problem:
+            if self.gate.should_log("odometry", problem):  # once a second per field and value
+                self.get_logger().error(("ignored odometry with non-finite values: " if "not finite" in problem
+                                         else "ignored odometry: ") + problem)
             return
         if abs(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w - 1.0) > 1e-3:
             self.get_logger().error("ignored odometry with a non-unit quaternion",

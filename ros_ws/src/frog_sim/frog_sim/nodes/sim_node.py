@@ -278,8 +278,6 @@ class SimNode(Node):
             self.get_logger().debug(f"primitive {name} at t = {self.sim.time:.3f} s")
 
     def on_activation(self, msg) -> None:
-        if self.gate.refused("frog/limb_activation", msg, stamped=False):
-            return
         limbs = list(msg.limbs)
         if any(i >= len(LIMB_NAMES) for i in limbs) or len(set(limbs)) != len(limbs):
             self.get_logger().error(f"rejected limb activation {limbs}: ids must be distinct "
@@ -288,6 +286,8 @@ class SimNode(Node):
         if not (math.isfinite(msg.pulse_duration) and 0 <= msg.pulse_duration <= 1.0):
             self.get_logger().error(f"rejected limb activation: pulse_duration "
                                     f"{msg.pulse_duration!r} s must be in [0, 1]")
+            return
+        if self.gate.refused("frog/limb_activation", msg, stamped=False):
             return
         if limbs and self.error is None:
             # The measured curvature profile already contains the hardware pulse.
