@@ -27,11 +27,11 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
-from frog_sim.core.model_parameters import FrogParameters
+from frog_sim.core.model_parameters import PARAMETER_SOURCES, FrogParameters
 from frog_sim.core.schedules import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import DEFAULT_TIME_STEP, ConvergenceError, FrogSimulation
 
@@ -81,9 +81,10 @@ def _model_params(defaults: FrogParameters) -> list:
         lo, hi = f.metadata.get("range", (None, None))
         unit = f.metadata.get("unit", "")
         choices = f.metadata.get("choices")
+        source = PARAMETER_SOURCES.get(f.name, ("", f"FrogParameters.{f.name}"))[1]
         rows.append(Param(f.name, getattr(defaults, f.name),
-                          f"FrogParameters.{f.name}{' [' + unit + ']' if unit not in ('', '-') else ''} (see "
-                          f"frog_sim/core/model_parameters.py)", lo, hi, tuple(choices) if choices else None))
+                          f"{f.name.replace('_', ' ')}{' [' + unit + ']' if unit not in ('', '-') else ''}: "
+                          f"{source}", lo, hi, tuple(choices) if choices else None))
     return rows
 
 
@@ -99,6 +100,7 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("sim_node", **kwargs)
+        self.gate = MessageGate(self)     # non-finite, unstamped or oversized commands are refused
         defaults = FrogParameters()
         p = declare_parameters(self, _NODE_PARAMS, on_change=self.on_parameters)
         self.cfg = p
@@ -166,8 +168,10 @@ class SimNode(Node):
 
     def on_parameters(self, changed: dict) -> None:
         if "real_time_factor" in changed:
-            # re-anchor the pacing so the new rate applies from now on, without a jump
+            # re-anchor the pacing so the new rate applies from now on, without a jump (and the
+            # diagnostics' real-time factors, which are measured since the anchor)
             self.wall_start, self.sim_start = time.monotonic(), self.sim.time
+            self.step_wall_s = 0.0
 
     # -- simulation loop -----------------------------------------------------------------
     def _target_time(self) -> float:
@@ -264,6 +268,8 @@ class SimNode(Node):
 
     # -- commands ------------------------------------------------------------------------
     def on_primitive(self, msg) -> None:
+        if self.gate.refused("frog/primitive", msg, stamped=False):
+            return
         if msg.id >= len(PRIMITIVE_NAMES):
             self.get_logger().error(f"rejected primitive id {msg.id}: out of range 0-8")
             return
@@ -286,6 +292,8 @@ class SimNode(Node):
             self.get_logger().error(f"rejected limb activation: pulse_duration "
                                     f"{msg.pulse_duration!r} s must be in [0, 1]")
             return
+        if self.gate.refused("frog/limb_activation", msg, stamped=False):
+            return
         if limbs and self.error is None:
             # The measured curvature profile already contains the hardware pulse.
             self.sim.fire_limbs([LIMB_NAMES[i] for i in limbs])
@@ -302,6 +310,7 @@ class SimNode(Node):
         self.error = None
         self.next_odom = self.next_shape = 0.0
         self.wall_start, self.sim_start = time.monotonic(), self.sim.time
+        self.step_wall_s = 0.0
         self.publish_state(force=True)
         response.success, response.message = True, "simulation reset to the initial pose"
         self.get_logger().info(f"reset to the initial pose at world time {self.world_time:.3f} s")
