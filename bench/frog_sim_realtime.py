@@ -54,8 +54,11 @@ def main() -> None:
     lib = ActuationLibrary.load()
     dt = DEFAULT_TIME_STEP
 
-    def fresh_sim():
-        sim = FrogSimulation(library=lib)
+    from frog_sim.core.model_parameters import FrogParameters
+    undamped = FrogParameters().replace(surge_damping_linear=0.0, sway_damping_linear=0.0, yaw_damping_linear=0.0)
+
+    def fresh_sim(params=None):
+        sim = FrogSimulation(params, library=lib)
         sim.set_gait(1.0, 0.5)
         return sim
 
@@ -66,7 +69,13 @@ def main() -> None:
 
     n_steps = int(round(args.sim_seconds / dt))
     rtf, rtf_cpu, per_step, iters, facts = [], [], [], [], []
+    rtf0, rtf0_cpu = [], []     # the same without the lumped body damping (issue 18), interleaved
     for _ in range(args.repeats):
+        sim = fresh_sim(undamped)
+        t0, c0 = time.perf_counter(), time.process_time()
+        sim.step(n_steps)
+        rtf0.append(args.sim_seconds / (time.perf_counter() - t0))
+        rtf0_cpu.append(args.sim_seconds / (time.process_time() - c0))
         sim = fresh_sim()
         t0 = time.perf_counter()
         c0 = time.process_time()
@@ -107,6 +116,9 @@ def main() -> None:
           f'(wall min {min(rtf):.1f}x, max {max(rtf):.1f}x) over {args.repeats} x {args.sim_seconds:g} sim s; '
           f'{med(per_step):.1f} us/step (wall), {med(iters):.2f} Newton iterations/step, '
           f'{med(facts):.2f} LU factorisations/step')
+    print(f'  without the lumped body damping (issue 18), same run: {med(rtf0_cpu):.1f}x by CPU time, '
+          f'{med(rtf0):.1f}x by wall time; with / without {med(rtf_cpu) / med(rtf0_cpu):.3f} (CPU), '
+          f'{med(rtf) / med(rtf0):.3f} (wall)')
     print(f'  numpy/scipy.sparse baseline (full Newton, spsolve): median real-time factor '
           f'{med(np_rtf_cpu):.2f}x by CPU time, {med(np_rtf):.2f}x by wall time over '
           f'{args.numpy_repeats} x {args.numpy_seconds:g} sim s; {med(np_step):.0f} us/step (wall)')

@@ -12,6 +12,8 @@ EPILOG = """examples:
   frog-library generate --states 200 --horizon 3.0 --out runs/lib/small.npz
   frog-library generate --states 8503 --out runs/lib/paper.npz          # paper size, resumable
   frog-library generate --states 8503 --out runs/lib/paper.npz --scheduler tcp://host:8786
+  frog-library generate --states 200 --out runs/lib/issue11.npz --set yaw_damping_linear=0 \\
+      --set surge_damping_linear=0 --set limb_drag_normal=1     # the model before issue 18
   frog-library info runs/lib/small.npz
   frog-library plot runs/lib/small.npz --out runs/lib/small_transitions.png --period 1.5
 
@@ -21,10 +23,11 @@ same arguments; the finished file is bit-identical whatever the number of worker
 
 
 def cmd_generate(args) -> int:
+    from frog_sim.cli import parse_overrides
     from frog_sim.core.motion_library import LibrarySpec, generate_library
     spec = LibrarySpec(n_states=args.states, horizon=args.horizon,
                        sample_interval=args.sample_interval, seed=args.seed,
-                       params={"egain_vol_pct": args.egain}, mirror=not args.no_mirror)
+                       params={"egain_vol_pct": args.egain, **parse_overrides(args.set)}, mirror=not args.no_mirror)
     spec.validate()
     path = generate_library(spec, args.out, work_dir=args.work_dir, workers=args.workers,
                             scheduler=args.scheduler, chunk_size=args.chunk_size)
@@ -115,6 +118,9 @@ def build_parser():
     g.add_argument("--sample-interval", type=float, default=0.05, help="state sample spacing [s]")
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--egain", type=float, default=10.0, help="EGaIn volume %% of the limbs")
+    g.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="another robot model: override a FrogParameters field (repeatable), e.g. "
+                        "yaw_damping_linear=0")
     g.add_argument("--out", type=Path, required=True)
     g.add_argument("--work-dir", type=Path, help="chunk folder (default <out>.chunks)")
     g.add_argument("--workers", type=int, help="local processes (default: all cores)")
@@ -140,9 +146,10 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     from frog_sim.core.batch import BatchError
     from frog_sim.core.motion_library import LibraryFileError
+    from frog_sim.cli import CliError
     try:
         return args.func(args)
-    except (LibraryFileError, BatchError, ValueError, OSError) as exc:
+    except (LibraryFileError, BatchError, ValueError, OSError, CliError) as exc:
         print(f"frog-library: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

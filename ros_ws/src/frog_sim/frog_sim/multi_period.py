@@ -214,3 +214,28 @@ def plot_replays(rep: dict, out, n_windows: int = 6) -> list:
         fig.savefig(files[-1], dpi=110)
         plt.close(fig)
     return files
+
+
+def heading_wander(sim, windows, primitive: str = 'B', draws: int = 4, latency: float = 0.10) -> tuple[float, float]:
+    """Mean |heading change| over one period of ``primitive`` decisions: (real, simulated) [rad].
+
+    The simulated decisions fire the primitive at once (so that the simulator's kick
+    variability, :meth:`~frog_sim.core.simulation.FrogSimulation.set_kick_variability`,
+    applies), ``draws`` times each. For B, a symmetric kick, the robot's wander measures how
+    much its left and right kicks differ from one firing to the next.
+    """
+    real, simulated = [], []
+    for w in windows:
+        if w.primitives[0] != primitive:
+            continue
+        real.append(abs(w.real[0][2]))
+        for _ in range(draws):
+            sim.reset()
+            sim.set_velocity(w.forward, w.lateral, w.yaw_rate)
+            sim.run(latency, record_interval=0.05)
+            sim.execute_primitive(primitive)
+            sim.run(w.period - latency, record_interval=0.05)
+            simulated.append(abs(sim.rigid_body_state().heading))
+    if not real:
+        raise ValueError(f'no {primitive} decision among the windows')
+    return float(np.mean(real)), float(np.mean(simulated))

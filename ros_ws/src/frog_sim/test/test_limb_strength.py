@@ -47,3 +47,28 @@ def test_bad_strengths_are_rejected(sim):
     for bad in ({"XX": 1.0}, {"FL": 0.0}, {"FR": float("nan")}):
         with pytest.raises(ValueError, match="limb strengths"):
             sim.set_limb_strength(bad)
+
+
+def _b_kick(sim):
+    """Heading change of one B from rest over 1.43 s [rad] (symmetric: 0 with equal kicks)."""
+    sim.reset()
+    sim.execute_primitive("B")
+    sim.run(1.43, record_interval=0.05)
+    return sim.rigid_body_state().heading
+
+
+def test_kick_variability_varies_each_firing_and_is_off_by_default():
+    sim = FrogSimulation()
+    assert abs(_b_kick(sim)) < 1e-6                      # equal kicks: B goes straight
+    sim.set_kick_variability(0.25, seed=3)
+    turns = [_b_kick(sim) for _ in range(6)]
+    # unequal left and right kicks turn a B, a different way each time, both ways
+    assert len({round(t, 9) for t in turns}) == 6 and min(turns) < 0 < max(turns), turns
+    assert all(0.2 <= f <= 2.0 for f in sim._firing_factor.values())
+    # the same seed replays the same kicks; the factors act on the excursion only
+    sim.set_kick_variability(0.25, seed=3)
+    assert [_b_kick(sim) for _ in range(6)] == pytest.approx(turns, abs=1e-12)
+    sim.set_kick_variability(0.0)
+    assert abs(_b_kick(sim)) < 1e-6
+    with pytest.raises(ValueError, match="kick variability"):
+        sim.set_kick_variability(float("nan"))

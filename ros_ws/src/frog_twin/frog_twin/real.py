@@ -90,7 +90,8 @@ def reference_sim_node(args, pose):
     x, y, heading = (float(v) for v in pose)
     return load_graph(GRAPH_FILE, "sim", {"sim_node": {
         "publish_clock": False, "real_time_factor": 1.0, "execute_primitives": True, "initial_x": x,
-        "initial_y": y, "initial_heading": heading, "limb_strength_sd": 0.0, "odom_alias_topic": ""}})["sim_node"]
+        "initial_y": y, "initial_heading": heading, "limb_strength_sd": 0.0, "kick_strength_sd": 0.0,
+        "odom_alias_topic": ""}})["sim_node"]
 
 
 class RealWatch:

@@ -57,6 +57,9 @@ PATH_NAMES = ("line", "sine", "ellipse")
 #: Realism defaults of the twin (each switchable; see --help).
 HARDWARE_PERIOD_S = 1.43     # decision period measured in the authors' closed-loop logs
 LIMB_STRENGTH_SD = 0.1       # relative spread of the four limbs' kick strengths (real limbs differ)
+# relative spread of each firing's kick: matches the robot's heading wander under B on the
+# straight runs: 4.0 deg per B period, real and simulated (issue 18; frog_twin test_kick_variability.py)
+KICK_STRENGTH_SD = 0.15
 
 #: The paths run along the tank's +y, the long side of the overhead camera's view
 #: (frog_vision's default camera: 0.8 m above the origin, image right = tank +y), centred on
@@ -204,7 +207,8 @@ def twin_graph(args, name: str, out: Path, path_settings, settings, start_pose, 
         "sim_node": {"real_time_factor": args.real_time_factor, "initial_x": x0, "initial_y": y0,
                      "initial_heading": h0, "execute_primitives": args.direct,
                      "odom_alias_topic": "frog/odom" if args.no_vision else "",
-                     "limb_strength_sd": args.limb_strength_sd, "seed": args.seed},
+                     "limb_strength_sd": args.limb_strength_sd, "kick_strength_sd": args.kick_strength_sd,
+                     "seed": args.seed},
         "planner_node": {"library_file": str(args.library), **as_dict(settings), **as_dict(path_settings)},
     }
     if not args.no_vision:
@@ -299,7 +303,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
     metrics["settings"] = {"planner": as_dict(settings), "path": as_dict(path_settings),
                            "start_pose": [x0, y0, h0], "real_time_factor": args.real_time_factor,
                            "seed": args.seed, "vision": not args.no_vision, "serial": not args.direct,
-                           "limb_strength_sd": args.limb_strength_sd}
+                           "limb_strength_sd": args.limb_strength_sd, "kick_strength_sd": args.kick_strength_sd}
     w = settings.weights
     twin_report.plot_run(rec, metrics, out.parent / f"{name}.png", weights=(w.distance, w.heading, w.progress))
     metrics["plot"] = str(out.parent / f"{name}.png")
@@ -449,6 +453,8 @@ def main(argv=None) -> int:
                     help="simulated seconds at most per path (default 150; replays: twice the real run + 15)")
     ap.add_argument("--no-vision", action="store_true", help="ground-truth odometry instead of camera + tracker")
     ap.add_argument("--direct", action="store_true", help="planner -> simulator without bridge, pty and emulator")
+    ap.add_argument("--kick-strength-sd", type=float, default=KICK_STRENGTH_SD,
+                    help="relative spread of each firing's kick, drawn per firing (0 = every kick alike)")
     ap.add_argument("--limb-strength-sd", type=float, default=LIMB_STRENGTH_SD,
                     help="relative spread of the limbs' kick strengths, drawn per limb from the seed (0 = nominal)")
     ap.add_argument("--lateral-offset", type=float, default=0.0, help="start left of the path [m]")
@@ -500,8 +506,9 @@ def main(argv=None) -> int:
     if args.duration is None and not replaying:
         args.duration = 150.0
     if not (args.real_time_factor > 0 and (args.duration is None or args.duration > 0)
-            and 0 <= args.limb_strength_sd < 1 and args.seeds >= 1):
-        ap.error("--real-time-factor and --duration must be > 0, --limb-strength-sd in [0, 1), --seeds >= 1")
+            and 0 <= args.limb_strength_sd < 1 and 0 <= args.kick_strength_sd <= 0.5 and args.seeds >= 1):
+        ap.error("--real-time-factor and --duration must be > 0, --limb-strength-sd in [0, 1), "
+                 "--kick-strength-sd in [0, 0.5], --seeds >= 1")
     if replaying:
         if args.path is not None and args.replay is None:
             ap.error("--path (a path CSV) goes with --replay; --replay-all finds <run>_path.csv itself")

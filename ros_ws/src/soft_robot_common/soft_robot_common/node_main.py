@@ -23,14 +23,44 @@ class _StopRequest:
     """Set by SIGINT/SIGTERM; the spin loop checks it between executor wake-ups.
 
     A handler that raised (KeyboardInterrupt) could interrupt rclpy inside a C++ call (a
-    message being converted) and surface as an unrelated RuntimeError; a flag cannot.
+    message being converted) and surface as an unrelated RuntimeError; a flag cannot. While
+    the node is being constructed (loading meshes, compiling kernels: up to a minute)
+    nothing reads the flag, so until :attr:`starting` is cleared a signal also raises
+    :class:`KeyboardInterrupt`, which ends the start-up at once.
     """
 
     def __init__(self):
         self.signal = None
+        self.starting = True
 
     def __call__(self, signum, frame):
         self.signal = signum
+        if self.starting:
+            raise KeyboardInterrupt
+
+
+def _name(node_class, args=None) -> str:
+    """The node's logger name (``ns.name``) as ``--ros-args -r __node:=`` / ``__ns:=`` set it.
+
+    For messages printed when the node could not be constructed (no logger to ask).
+    """
+    name = getattr(node_class, "NODE_NAME", node_class.__name__)
+    namespace = ""
+    argv = list(sys.argv[1:] if args is None else args)
+    for i, arg in enumerate(argv):
+        rule = argv[i + 1] if arg in ("-r", "--remap") and i + 1 < len(argv) else None
+        if rule is None:
+            continue
+        target, _, value = rule.partition(":=")
+        owner, _, key = target.rpartition(":")
+        if owner and owner != name:
+            continue
+        if key == "__node":
+            name = value
+        elif key == "__ns":
+            namespace = value
+    parts = [p for p in namespace.split("/") if p]
+    return ".".join(parts + [name])
 
 
 def run_node(node_class, args=None, close=None, executor=None) -> int:
@@ -50,7 +80,10 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
     node = None
     spinner = None
     try:
+        if stop.signal is not None:      # a signal before the handler could raise
+            raise KeyboardInterrupt
         node = node_class()
+        stop.starting = False
         for name, hint in undeclared_overrides(node):
             node.get_logger().warn(f"parameter override '{name}' is not a parameter of this node and is ignored"
                                    + (f" (did you mean '{hint}'?)" if hint else ""))
@@ -62,11 +95,12 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
         while stop.signal is None and rclpy.ok():
             spinner.spin_once(timeout_sec=0.1)
     except (ConfigurationError, ParameterException) as exc:
-        name = getattr(node_class, "NODE_NAME", node_class.__name__)
+        name = node.get_logger().name if node is not None else _name(node_class, args)
         print(f"[{name}] fatal configuration error: {exc}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        if node is None:
+            print(f"[{_name(node_class, args)}] stopped by signal during start-up", file=sys.stderr)
     finally:
         if spinner is not None:
             spinner.shutdown(timeout_sec=5.0)

@@ -22,8 +22,49 @@ _TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEG
           float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
 _TYPE_WORDS = {bool: "a boolean (true/false)", int: "an integer", float: "a floating-point number (write 3.0, not 3)",
                str: "a string", list: "a list of strings"}
-_INT_LIMIT = 2 ** 62          # an int64 range end that means "no bound"
+_INT_LIMIT = 2 ** 31 - 1      # an integer without a bound on one side: +-2147483647 (sizes, counts, seeds)
 _FLOAT_LIMIT = 1e300          # likewise for doubles (finite, so the descriptor prints as a number)
+
+
+def topic_name_problem(name: str) -> str | None:
+    """Why ``name`` is not a valid (relative or absolute) ROS topic name, or None.
+
+    The rule rcl applies when a publisher or subscription is created, checked before, so a
+    bad name is a one-line configuration error rather than a traceback.
+    """
+    from rclpy.expand_topic_name import expand_topic_name
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+    try:
+        validate_full_topic_name(expand_topic_name(name, "node", "/"))
+    except Exception as exc:          # rclpy raises ValueError or InvalidTopicNameException
+        text = str(exc).splitlines()[0]
+        text = text.split(", at /")[0]                          # drop the C source location
+        text = text.replace(f"topic name {name!r} is invalid: ", "").replace("Invalid topic name: ", "")
+        return f"is not a valid topic name ({text})"
+    return None
+
+
+def frame_name_problem(name: str) -> str | None:
+    """Why ``name`` is not a usable tf frame id (empty, whitespace, a leading '/'), or None."""
+    if not name:
+        return "must name a frame (it is empty)"
+    if any(c.isspace() for c in name):
+        return "must not contain whitespace"
+    if name.startswith("/"):
+        return "must not start with '/' (tf2 frame ids are plain names)"
+    return None
+
+
+def _is_frame_param(name: str) -> bool:
+    """Parameters named ``*_frame`` or ``frame_id`` hold a tf frame id."""
+    leaf = name.rsplit(".", 1)[-1]
+    return leaf.endswith("_frame") or leaf == "frame_id"
+
+
+def _is_topic_param(name: str) -> bool:
+    """Parameters named ``*_topic`` (one name) or ``topics``/``*_topics`` (a list) hold topic names."""
+    leaf = name.rsplit(".", 1)[-1]
+    return leaf.endswith("_topic") or leaf == "topic" or leaf == "topics" or leaf.endswith("_topics")
 
 
 class ConfigurationError(ValueError):
@@ -35,7 +76,11 @@ class Param:
     """One node parameter: name, default (its type is the parameter's type), description.
 
     ``min``/``max`` bound numbers (inclusive), ``choices`` lists the allowed strings, and
-    ``live`` makes the parameter writable while the node runs (otherwise read-only).
+    ``live`` makes the parameter writable while the node runs (otherwise read-only). A
+    parameter named ``*_topic`` (a string) or ``topics``/``*_topics`` (a list) must hold
+    valid topic names (empty = none); one named ``*_frame`` or ``frame_id`` a non-empty frame
+    id. ``ints_as_text`` lets a string parameter be given as
+    an integer (``-p source:=0``: YAML reads 0 as a number); the node sees its text.
     """
 
     name: str
@@ -45,6 +90,7 @@ class Param:
     max: float | None = None
     choices: tuple | None = None
     live: bool = False
+    ints_as_text: bool = False     # a string that may also be given as an integer (a device index)
 
     @property
     def kind(self) -> type:
@@ -55,17 +101,30 @@ class Param:
         kind = self.kind
         ok_type = (isinstance(value, kind) and not (kind is int and isinstance(value, bool))
                    or kind is list and isinstance(value, (list, tuple)))
+        if self.ints_as_text and isinstance(value, int) and not isinstance(value, bool):
+            value, ok_type = str(value), True
         if not ok_type:
             return f"{self.name}={value!r} must be {_TYPE_WORDS[kind]}"
         if kind in (int, float):
             if kind is float and not math.isfinite(value):
                 return f"{self.name}={value!r} must be finite"
+            if kind is int and not -_INT_LIMIT <= value <= _INT_LIMIT:
+                return f"{self.name}={value!r} is outside +-{_INT_LIMIT}"
             if self.min is not None and value < self.min:
                 return f"{self.name}={value!r} is below its minimum {self.min!r}"
             if self.max is not None and value > self.max:
                 return f"{self.name}={value!r} is above its maximum {self.max!r}"
         if self.choices is not None and value not in self.choices:
             return f"{self.name}={value!r} is not one of {', '.join(map(repr, self.choices))}"
+        if kind in (str, list) and _is_topic_param(self.name):
+            for topic in ([value] if kind is str else value):
+                problem = topic_name_problem(topic) if topic else None
+                if problem:
+                    return f"{self.name}={topic!r} {problem}"
+        if kind is str and _is_frame_param(self.name):
+            problem = frame_name_problem(value)
+            if problem:
+                return f"{self.name}={value!r} {problem}"
         return None
 
     def descriptor(self, full_name: str) -> ParameterDescriptor:
@@ -74,7 +133,8 @@ class Param:
         if self.choices is not None:
             text += f" (one of: {', '.join(map(str, self.choices))})"
         d = ParameterDescriptor(name=full_name, type=_TYPES.get(kind, ParameterType.PARAMETER_STRING_ARRAY),
-                                description=text, read_only=not self.live)
+                                description=text, read_only=not self.live,
+                                dynamic_typing=self.ints_as_text)
         if kind is int and (self.min is not None or self.max is not None):
             d.integer_range = [IntegerRange(
                 from_value=int(self.min) if self.min is not None else -_INT_LIMIT,
@@ -136,10 +196,13 @@ def declare_parameters(node, table, prefix: str = "",
         except ParameterException as exc:
             given = node._parameter_overrides.get(full)
             value = given.value if given is not None else None
-            raise ConfigurationError(row.problem(value) or f"{full}: {exc}") from None
+            problem = row.problem(value)
+            raise ConfigurationError(prefix + problem if problem else f"{full}: {exc}") from None
         value = node.get_parameter(full).value
         if isinstance(value, tuple):
             value = list(value)
+        if row.ints_as_text and isinstance(value, int) and not isinstance(value, bool):
+            value = str(value)
         problem = row.problem(value)
         if problem:
             raise ConfigurationError(prefix + problem)
@@ -160,6 +223,8 @@ def declare_parameters(node, table, prefix: str = "",
                 continue
             mine = True
             value = list(p.value) if isinstance(p.value, tuple) else p.value
+            if row.ints_as_text and isinstance(value, int) and not isinstance(value, bool):
+                value = str(value)
             problem = row.problem(value)
             if problem:
                 return SetParametersResult(successful=False, reason=prefix + problem)

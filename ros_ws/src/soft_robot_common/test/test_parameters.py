@@ -91,3 +91,13 @@ def test_rows_from_a_dataclass():
     assert (w.name, w.default, w.min, w.max, w.live) == ("w", 2.0, 0.0, None, True)
     assert w.description == "weight [1/m]" and kind.choices == ("a", "b") and not kind.live
     assert w.problem(-1.0) and not w.problem(5.0)
+
+
+def test_topic_parameters_hold_valid_topic_names():
+    row = Param("odom_topic", "frog/odom", "a topic")
+    assert row.problem("frog/odom") is None and row.problem("/a/b") is None and row.problem("") is None
+    for bad in ("bad name", "1abc", "a//b", "a/"):
+        assert "is not a valid topic name" in row.problem(bad), bad
+    assert "'x y'" in Param("topics", [""], "topics").problem(["/ok", "x y"])
+    assert Param("odom_label", "odom", "not a topic").problem("bad name") is None
+    assert "must name a frame" in Param("world_frame", "tank", "a frame").problem("")

@@ -205,9 +205,15 @@ def decode_relay_line(raw: bytes, order: str = "wxyz", norm_tolerance: float = 0
 def _quaternion(text: str, order: str, tol: float) -> Quaternion | DecodeError:
     body = text[10:].strip().lstrip(":=").strip()
     tokens = [t for t in _SEPARATORS.split(body) if t]
-    if len(tokens) != 4 or not all(_NUMBER.fullmatch(t) for t in tokens):
+    if len(tokens) != 4:
         return DecodeError(ErrorKind.BAD_QUATERNION,
                            f"expected four numbers after Q, got {len(tokens)} token(s)", excerpt(text))
+    for i, token in enumerate(tokens):
+        if not _NUMBER.fullmatch(token):
+            finite = token.lower().lstrip("+-") not in ("nan", "inf", "infinity")
+            return DecodeError(ErrorKind.BAD_QUATERNION,
+                               f"number {i + 1} after Q is {'not a number' if finite else 'non-finite'}: "
+                               f"{token[:16]!r}", excerpt(text))
     values = [float(t) for t in tokens]
     if not all(math.isfinite(v) for v in values):
         return DecodeError(ErrorKind.BAD_QUATERNION, "non-finite number", excerpt(text))

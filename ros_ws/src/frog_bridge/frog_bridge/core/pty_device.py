@@ -67,9 +67,19 @@ class PtyDevice:
             except OSError:
                 pass
 
+    # how long a non-blocking write waits for a line that another thread is writing
+    LINE_WAIT_S = 0.1
+
     def write(self, data: bytes) -> int:
-        """Write what fits now; the rest is dropped (counted). Returns bytes written."""
-        with self.lock:
+        """Write what fits now; the rest is dropped (counted). Returns bytes written.
+
+        Waits at most :attr:`LINE_WAIT_S` for a :meth:`write_all` in progress (lines never
+        interleave, as on the relay's UART); after that the line is dropped.
+        """
+        if not self.lock.acquire(timeout=self.LINE_WAIT_S):
+            self.dropped_bytes += len(data)
+            return 0
+        try:
             if self.controller is None:
                 self.dropped_bytes += len(data)
                 return 0
@@ -81,29 +91,33 @@ class PtyDevice:
                 n = 0
             self.dropped_bytes += len(data) - n
             return n
+        finally:
+            self.lock.release()
 
     def write_all(self, data: bytes, timeout: float = 2.0) -> int:
-        """Write all of ``data``, waiting for the reader up to ``timeout``; returns bytes written."""
+        """Write all of ``data`` as one line, waiting for the reader up to ``timeout``.
+
+        Returns the bytes written. Holds :attr:`lock` throughout, so other writes never land
+        inside the line; call it from a worker thread, never from an executor callback.
+        """
         import select
         import time
         end = time.monotonic() + timeout
         done = 0
-        while done < len(data) and time.monotonic() < end:
-            with self.lock:
-                fd = self.controller
-                if fd is None:
-                    break
+        with self.lock:
+            fd = self.controller
+            while fd is not None and done < len(data) and time.monotonic() < end:
                 try:
                     done += os.write(fd, data[done:done + 4096])
                     continue
                 except OSError as exc:
                     if exc.errno not in (errno.EAGAIN, errno.EIO):
                         raise
-            try:
-                select.select([], [fd], [], 0.05)
-            except (OSError, ValueError):    # unplugged meanwhile
-                break
-        self.dropped_bytes += len(data) - done
+                try:
+                    select.select([], [fd], [], 0.05)
+                except (OSError, ValueError):
+                    break
+            self.dropped_bytes += len(data) - done
         return done
 
     def read(self) -> bytes:

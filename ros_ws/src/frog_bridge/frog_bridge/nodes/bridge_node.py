@@ -15,6 +15,7 @@ state machine are in :mod:`frog_bridge.core`.
 from __future__ import annotations
 
 import gc
+import math
 import statistics
 import sys
 import time
@@ -25,7 +26,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
 from std_msgs.msg import Empty
 from std_srvs.srv import Trigger
 
@@ -95,6 +96,7 @@ class BridgeNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("bridge_node", **kwargs)
+        self.gate = MessageGate(self)     # non-finite, unstamped or oversized inputs
         p = declare_parameters(self, PARAMS, validate=_validate)
         self.cfg = p
         from soft_robot_interfaces.msg import LimbActivation, Primitive
@@ -154,6 +156,10 @@ class BridgeNode(Node):
     # -- commands in -------------------------------------------------------------------
     def on_primitive(self, msg) -> None:
         t_in = time.perf_counter()
+        problem = self.gate.problem(msg, stamped=False)   # a zero stamp on a command means now
+        if problem:
+            self._refuse_input("primitive", problem)
+            return
         if msg.id >= len(PRIMITIVE_NAMES):
             self._refuse(REFUSED_INVALID, f"primitive id {msg.id} is out of range 0-8")
             return
@@ -167,11 +173,22 @@ class BridgeNode(Node):
 
     def on_limb_command(self, msg) -> None:
         t_in = time.perf_counter()
+        # a zero stamp on a command means now; a bad pulse length gets the scheduler's own message
+        problem = self.gate.problem(msg, stamped=False) if math.isfinite(msg.pulse_duration) else None
+        if problem:
+            self._refuse_input("limb command", problem)
+            return
         limbs = list(msg.limbs)
         if not self._link_allows(f"limb command {limb_names(limbs)}"):
             return
         self._decided(self.scheduler.submit_limbs(limbs, _stamp_s(msg.header.stamp), self._now(),
                                                   msg.pulse_duration), t_in)
+
+    def _refuse_input(self, what: str, problem: str) -> None:
+        """A message the common rule refuses (non-finite, oversized): counted, logged rate-limited."""
+        self.scheduler.count_refusal(REFUSED_INVALID)
+        if self.gate.should_log(what, problem):
+            self.get_logger().warn(f"refused: {what}: {problem}")
 
     def _refuse(self, key: str, reason: str, throttle: bool = False) -> None:
         self.scheduler.count_refusal(key)

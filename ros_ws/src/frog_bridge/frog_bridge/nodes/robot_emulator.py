@@ -13,8 +13,10 @@ request: ``~/inject_emergency``, ``~/unplug`` (and ``~/replug``), ``~/inject_gar
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import os
+import queue
 import select
 import sys
 import threading
@@ -26,7 +28,8 @@ from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import (ConfigurationError, NodeDiagnostics, Param, PathClaim, declare_parameters,
+                               message_problem, namespaced_path, run_node)
 from std_srvs.srv import Trigger
 
 from frog_bridge.core.emulator import (
@@ -37,7 +40,9 @@ from frog_bridge.core.protocol import (
 from frog_bridge.core.pty_device import OpenedDevice, PtyDevice
 
 PARAMS = [
-    Param("link_path", "/tmp/frog_robot_tty", "stable path linked to the emulated device (the bridge's port)"),
+    Param("link_path", "/tmp/frog_robot_tty", "stable path linked to the emulated device (the bridge's port); "
+          "default /tmp/frog_robot_tty in the root namespace, /tmp/frog_robot_tty_<ns> in /<ns>; refused if "
+          "another live emulator holds it"),
     Param("device", "", "open this existing serial device instead of creating a pty (link_path unused)"),
     Param("ble_latency_s", DEFAULT_BLE_LATENCY_S, "fixed relay + BLE + firmware delay per line [s]",
           min=0.0, max=1.0),
@@ -64,7 +69,8 @@ class RobotEmulator(Node):
 
     def __init__(self, **kwargs):
         super().__init__("robot_emulator", **kwargs)
-        p = declare_parameters(self, PARAMS)
+        p = declare_parameters(self, [dataclasses.replace(r, default=namespaced_path(r.default, self.get_namespace()))
+                                      if r.name == "link_path" else r for r in PARAMS])
         self.cfg = p
         from soft_robot_interfaces.msg import LimbActivation
         self._LimbActivation = LimbActivation
@@ -76,8 +82,11 @@ class RobotEmulator(Node):
             raise ConfigurationError(f"link_path {link!r} exists and is not a symbolic link; refusing to replace it")
         elif not os.path.isdir(os.path.dirname(os.path.abspath(link))):
             raise ConfigurationError(f"link_path {link!r}: folder does not exist")
+        self._claim = None if p["device"] else PathClaim(link, "link_path")
         seed = None if p["seed"] < 0 else p["seed"]
         self.rng = np.random.default_rng(seed)
+        # the fault writer's own stream (a Generator is not shared between threads)
+        self._garbage_rng = np.random.default_rng(None if seed is None else [seed, 1])
         self.ble = BleLinkModel(p["ble_latency_s"], p["ble_interval_s"], p["loss_rate"], self.rng)
         self.firmware = RobotFirmware(p["initial_pulse_ms"])
         self.framer = LineFramer(4096)
@@ -122,10 +131,29 @@ class RobotEmulator(Node):
             raise ConfigurationError(f"cannot open the emulated device: {exc}") from exc
         self._thread = threading.Thread(target=self._reader, name="pty_reader", daemon=True)
         self._thread.start()
+        # Faults that write a lot (garbage) wait for the reader of the pty: never inside an
+        # executor callback, where they would block services, parameters and shutdown.
+        self._faults: queue.Queue = queue.Queue()
+        self._fault_thread = threading.Thread(target=self._fault_worker, name="fault_writer", daemon=True)
+        self._fault_thread.start()
+        self.diagnostics = NodeDiagnostics(self, "emulated relay", self._diagnostics,
+                                           hardware_id=p["device"] or link)
         where = path if p["device"] else f"{link} -> {path}"
         self.get_logger().info(f"emulated relay on {where}; BLE {p['ble_latency_s'] * 1e3:g} ms + "
                                f"U(0, {p['ble_interval_s'] * 1e3:g}) ms, loss {p['loss_rate']:g}, IMU "
                                f"{p['imu_rate_hz']:g} Hz")
+
+    def _diagnostics(self):
+        from soft_robot_common.diagnostics import OK, WARN
+        values = dict(self.counts, device=self.device.device_path, dropped_bytes=self.device.dropped_bytes,
+                      heading_known=self.yaw is not None)
+        if not self.device.plugged:
+            return WARN, "unplugged (fault injected): waiting for ~/replug or the replug timer", values
+        if time.monotonic() < self.stalled_until:
+            return WARN, "stalled (fault injected)", values
+        if self.counts["lines"] == 0:
+            return OK, "waiting for lines from the bridge", values
+        return OK, "relaying", values
 
     # -- reader thread ----------------------------------------------------------------------
     def _request(self, what: str, arg=None) -> None:
@@ -217,6 +245,12 @@ class RobotEmulator(Node):
         self.get_logger().debug(f"fired {limb_names(fire.limbs)} for {fire.pulse_s * 1e3:g} ms")
 
     def on_odom(self, msg: Odometry) -> None:
+        problem = message_problem(msg, stamped=False)    # only the heading is used: any stamp will do
+        if problem:
+            self.counts["odom_refused"] = self.counts.get("odom_refused", 0) + 1
+            self.get_logger().warn(f"frog/sim/odom refused: {problem}; the IMU keeps the last good heading",
+                                   throttle_duration_sec=2.0)
+            return
         o = msg.pose.pose.orientation
         yaw = quaternion_yaw(o.w, o.x, o.y, o.z)
         if self.yaw is None:
@@ -264,18 +298,46 @@ class RobotEmulator(Node):
 
     def on_garbage(self, request, response):
         n = self.cfg["garbage_lines"]
-        written = 0
-        for i in range(n):
-            written += self.device.write_all(garbage_line(self.rng, i))
-        self.get_logger().warn(f"fault: wrote {n} garbage lines ({written} bytes)")
-        response.success, response.message = True, f"{n} lines, {written} bytes"
+        if not self._faults.empty():
+            response.success, response.message = False, "garbage injection already under way"
+            return response
+        self._faults.put(n)
+        self.get_logger().warn(f"fault: writing {n} garbage lines (in the background)")
+        response.success, response.message = True, f"writing {n} garbage lines"
         return response
+
+    # seconds a garbage line may wait for the reader; the first line that cannot be written
+    # within it ends the injection (nobody reads the device)
+    GARBAGE_WRITE_TIMEOUT_S = 2.0
+
+    def _fault_worker(self) -> None:
+        while self._running:
+            try:
+                n = self._faults.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            written = lines = 0
+            for i in range(n):
+                if not self._running:
+                    break
+                line = garbage_line(self._garbage_rng, i)
+                done = self.device.write_all(line, timeout=self.GARBAGE_WRITE_TIMEOUT_S)
+                written += done
+                if done < len(line):
+                    break
+                lines += 1
+            self._faults.task_done()
+            note = "" if lines == n else f" of {n} (the device is not being read; the rest dropped)"
+            self.get_logger().warn(f"fault: wrote {lines} garbage lines{note} ({written} bytes)")
 
     def close(self) -> None:
         self._running = False
         os.write(self._wake_w, b"x")
         self._thread.join(2.0)
+        self._fault_thread.join(2.0)
         self.device.unplug()
+        if self._claim is not None:
+            self._claim.release()
         if self._log_file is not None:
             self._log_file.close()
         self.get_logger().info(f"emulator stopped: {self.counts}")

@@ -165,8 +165,10 @@ def load_motion_library(path):
     except LibraryFormatError:
         raise
     except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, zipfile.LargeZipFile) as exc:
+        # numpy's wording for a file with no zip/npy header speaks of pickles: not the user's problem
+        detail = "no .npz (zip) header" if "pickle" in str(exc) else f"{type(exc).__name__}: {exc}"
         raise LibraryFormatError(f"{src} is not a readable .npz (truncated, corrupt or not a zip): "
-                                 f"{type(exc).__name__}: {exc}") from None
+                                 f"{detail}") from None
     return _validate(data, src)
 
 

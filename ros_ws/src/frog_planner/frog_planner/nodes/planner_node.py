@@ -8,8 +8,10 @@ pose in the world frame, twist in the body frame per REP-105), asks
 publishes primitive I (no action), says why in the status and logs it when the state
 changes: stopped (``~/stop``, or ``frog/stop``, std_msgs/Empty, the run's one stop that
 also reaches the bridge), goal reached, odometry missing or older than
-``stale_periods`` periods, or a library that cannot be used. Weights, depth, look-aheads
-and the path can be changed while running (``ros2 param set``).
+``stale_periods`` periods, or a library that cannot be used. Weights, depth, look-aheads,
+the path and ``library_file`` can be changed while running (``ros2 param set``); setting
+``library_file`` (to a new path, or again to the same one after fixing the file) loads it
+anew, so a missing or corrupt library is fixed without a restart.
 """
 
 from __future__ import annotations
@@ -22,7 +24,9 @@ from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from soft_robot_common import ConfigurationError, Param, declare_parameters, params_from_dataclass, run_node
+from soft_robot_common import (ConfigurationError, MessageGate, NodeDiagnostics, Param, declare_parameters,
+                               params_from_dataclass, run_node)
+from soft_robot_common.diagnostics import ERROR, OK, WARN
 from std_msgs.msg import Empty
 from std_srvs.srv import Trigger
 
@@ -33,7 +37,8 @@ from frog_planner.core.transition_model import TransitionModel
 
 # The node's own settings; the planner's and the path's come from frog_planner.core.settings.
 _NODE_PARAMS = [
-    Param("library_file", "", "motion-primitive library (.npz, docs/motion_library_format.md)"),
+    Param("library_file", "", "motion-primitive library (.npz, docs/motion_library_format.md); live: set it "
+          "(again) to load a new or fixed file", live=True),
     Param("odom_topic", "frog/odom", "odometry input (tracker, or the simulator's ground truth); relative "
           "names resolve in the node's namespace"),
     Param("world_frame", "tank", "frame of the path and the status poses"),
@@ -72,6 +77,7 @@ class PlannerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("planner_node", **kwargs)
+        self.gate = MessageGate(self)     # non-finite, unstamped or oversized odometry is refused
         self.cfg = declare_parameters(self, _NODE_PARAMS + _PLANNER_PARAMS + _PATH_PARAMS,
                                       validate=_check_settings, on_change=self.on_parameters)
         p = self.cfg
@@ -104,10 +110,13 @@ class PlannerNode(Node):
         self._last_state = None
         self.publish_path()
         self.create_timer(self.settings.period, self.decide)
+        self.diagnostics = NodeDiagnostics(self, "planner", self._diagnostics, hardware_id="planner")
         self.get_logger().info(
             f"following a {self.path.name} path of {self.path.length:.3f} m, period {self.settings.period} s, "
             f"depth {self.settings.depth}, metric {self.settings.metric}; odometry from "
-            f"{self.resolve_topic_name(p['odom_topic'])}; {'running' if self.running else 'waiting for ~/start'}")
+            f"{self.resolve_topic_name(p['odom_topic'])}; "
+            + (f"not planning: {self.library_error}" if self.library_error
+               else 'running' if self.running else 'waiting for ~/start'))
 
     def load_library(self) -> None:
         """Load the model; on failure log the reason and keep running (publishing I)."""
@@ -124,12 +133,20 @@ class PlannerNode(Node):
                 return
             except (LibraryFormatError, ValueError, OSError) as exc:
                 self.library_error = f"cannot use library {p['library_file']!r}: {exc}"
+        self.library_error += " (set library_file to fix it: ros2 param set <node> library_file <file>)"
         self.get_logger().error(self.library_error + "; publishing primitive I until fixed")
 
     def on_parameters(self, changed: dict) -> None:
         """Apply live changes: planner settings keep the progress, a new path starts over."""
         p = self.cfg
         self.settings = _settings(PlannerSettings, p, _PLANNER_FIELDS)
+        if "library_file" in changed:
+            progress = self.planner.progress if self.planner is not None else 0.0
+            self.model = self.planner = None
+            self.load_library()
+            if self.planner is not None:
+                self.planner.reset(progress)
+            return
         if changed.keys() & _PATH_FIELDS:
             try:
                 self.path = _settings(PathSettings, p, _PATH_FIELDS).build()
@@ -157,14 +174,17 @@ class PlannerNode(Node):
             ps.pose.orientation.z, ps.pose.orientation.w = math.sin(h / 2), math.cos(h / 2)
             msg.poses.append(ps)
         self.path_pub.publish(msg)
+        # under use_sim_time the clock reads 0 until /clock arrives: publish again once it runs
+        self._path_unstamped = msg.header.stamp.sec == 0 and msg.header.stamp.nanosec == 0
 
     # -- inputs ------------------------------------------------------------------------------
     def on_odom(self, msg: Odometry) -> None:
         p, q, tw = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
-        values = (p.x, p.y, q.x, q.y, q.z, q.w, tw.linear.x, tw.linear.y, tw.angular.z)
-        if not all(math.isfinite(v) for v in values):
-            self.get_logger().error("ignored odometry with non-finite values",
-                                    throttle_duration_sec=2.0)
+        problem = self.gate.problem(msg)                 # every float finite, stamped (one rule)
+        if problem:
+            if self.gate.should_log("odometry", problem):  # once a second per field and value
+                self.get_logger().error(("ignored odometry with non-finite values: " if "not finite" in problem
+                                         else "ignored odometry: ") + problem)
             return
         if abs(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w - 1.0) > 1e-3:
             self.get_logger().error("ignored odometry with a non-unit quaternion",
@@ -212,6 +232,18 @@ class PlannerNode(Node):
             return S.STATE_WAITING, f"odometry is stale ({age:.2f} s old)"
         return None
 
+    def _diagnostics(self):
+        """(level, message, values): ERROR without a usable library, WARN while waiting."""
+        S = self._Status
+        blocked = self._state()
+        level = OK if blocked is None or blocked[0] in (S.STATE_IDLE, S.STATE_GOAL_REACHED) else \
+            ERROR if blocked[0] == S.STATE_ERROR else WARN
+        message = f"following the {self.path.name} path" if blocked is None else blocked[1]
+        values = {"library_file": self.cfg["library_file"], "path": self.path.name,
+                  "progress": float(self.planner.progress) if self.planner is not None else 0.0,
+                  "odometry_topic": self.resolve_topic_name(self.cfg["odom_topic"])}
+        return level, message, values
+
     def _publish(self, primitive_id: int, name: str, state: int, message: str, decision=None) -> None:
         stamp = self.get_clock().now().to_msg()
         msg = self._Primitive(id=primitive_id, name=name)
@@ -254,6 +286,8 @@ class PlannerNode(Node):
 
     def decide(self) -> None:
         S = self._Status
+        if self._path_unstamped:
+            self.publish_path()
         blocked = self._state()
         if blocked is None:
             pose, velocity = self.odom

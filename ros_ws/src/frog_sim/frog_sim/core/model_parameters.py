@@ -26,6 +26,11 @@ experiment speeds (``frog-sweep calibrate``). ``frog_sim.calibration.LEGACY_MODE
 (``body_fluid_section='rod'``, ``limb_fluid_width=0.004``, ``added_mass_lumping='normal'``,
 ``limb_curl_direction='backward'``, ``limb_root_angle_deg=-75``,
 ``front_root_angle_offset_deg=0``, ``body_drag_normal=0.8``) restores the earlier model.
+
+Issue 18 (turns carried into the next periods): a linear damping lumped on the rigid
+body (surge X_u, sway Y_v, yaw N_r; ``core/body_damping.py``) and the limbs' normal drag
+coefficient of a flat strip, calibrated on N = 1..4 period replays of the hardware runs
+(``frog-sweep calibrate-replays``; record in ``frog_sim/data/replay_calibration.json``).
 """
 from __future__ import annotations
 
@@ -88,8 +93,8 @@ class FrogParameters:
     # --- fluid (paper, Hydrodynamic Characterization) ---
     # rho_f
     fluid_density: float = field(default=WATER_DENSITY, metadata={'range': (900.0, 1100.0), 'unit': 'kg/m^3'})
-    # C_ln
-    limb_drag_normal: float = field(default=1.0, metadata={'range': (0.0, 5.0), 'unit': '-'})
+    # C_ln (a flat strip normal to the flow; issue 18 calibration; paper 1 for a rod)
+    limb_drag_normal: float = field(default=2.075, metadata={'range': (0.0, 5.0), 'unit': '-'})
     # C_lt
     limb_drag_tangent: float = field(default=0.01, metadata={'range': (0.0, 1.0), 'unit': '-'})
     # C_bn (jointly calibrated with the body's height section, issue 11; paper 0.8 with a 4 mm rod)
@@ -121,11 +126,11 @@ class FrogParameters:
     front_root_angle_offset_deg: float = field(default=32.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
     # --- linear damping lumped on the rigid body (issue 18; core/body_damping.py) ---
     # X_u: surge
-    surge_damping_linear: float = field(default=0.0, metadata={'range': (0.0, 1.0), 'unit': 'N s/m'})
+    surge_damping_linear: float = field(default=0.0483, metadata={'range': (0.0, 1.0), 'unit': 'N s/m'})
     # Y_v: sway
     sway_damping_linear: float = field(default=0.0, metadata={'range': (0.0, 1.0), 'unit': 'N s/m'})
     # N_r: yaw
-    yaw_damping_linear: float = field(default=0.0, metadata={'range': (0.0, 0.05), 'unit': 'N m s/rad'})
+    yaw_damping_linear: float = field(default=0.000375, metadata={'range': (0.0, 0.05), 'unit': 'N m s/rad'})
 
     def replace(self, **changes) -> 'FrogParameters':
         """Return a copy with some fields changed (validated)."""
@@ -244,7 +249,9 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
                               'body EI ~ 2.6e4 x limb EI so the body stays square'),
     'body_section_width': ('m', 'frame width (L_o - L_i)/2 = 27.5 mm'),
     'fluid_density': ('kg/m^3', 'paper: rho_f = 1000'),
-    'limb_drag_normal': ('-', 'paper: C_ln = 1'),
+    'limb_drag_normal': ('-', 'joint calibration on N-period replays (issue 18): 2.075; the limbs are flat strips '
+                         '(limb_fluid_width) and a flat plate normal to the flow has C_d ~ 2.0 (Hoerner, Fluid-Dynamic '
+                         'Drag, 1965, ch. 3: 1.98 for a 2D plate; 1.17 for a square one); paper: C_ln = 1 for a rod'),
     'limb_drag_tangent': ('-', 'paper: C_lt = 0.01'),
     'body_drag_normal': ('-', 'joint calibration (frog-sweep calibrate, issue 11): 0.71 with the body height '
                          'section (paper: 0.8 with a 4 mm rod, calibrated on the 10 % runs only)'),
@@ -265,9 +272,14 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
                                     'the front relative to limb_root_angle_deg: 32 -> front limbs 58 deg aft of '
                                     'lateral (Fig. 2b gives no angle for either pair)'),
     'surge_damping_linear': ('N s/m', 'X_u of the linear damping lumped on the rigid body (Fossen D_L; radiation '
-                             'damping, meniscus, limb recovery strokes; issue 18, core/body_damping.py)'),
-    'sway_damping_linear': ('N s/m', 'Y_v of the same linear damping (sideways)'),
-    'yaw_damping_linear': ('N m s/rad', 'N_r of the same linear damping (yaw): what stops the turn after a kick'),
+                             'damping, meniscus, limb recovery strokes; core/body_damping.py): 0.0483, joint '
+                             'calibration on N-period replays and all speeds (issue 18, '
+                             'frog_sim/data/replay_calibration.json)'),
+    'sway_damping_linear': ('N s/m', 'Y_v of the same linear damping (sideways): 0, not calibrated (the side-slip '
+                            'targets are met without it; any Y_v > 0 lowers them)'),
+    'yaw_damping_linear': ('N m s/rad', 'N_r of the same linear damping (yaw), what stops the turn after a kick: '
+                           '3.75e-4, joint calibration on N-period replays (issue 18): a decay rate N_r / I = 0.37 '
+                           '1/s (I = 1.0e-3 kg m^2 with the added mass), beside the limbs\' quadratic drag'),
     'pulse_duration': ('s', 'DESIGN.md hardware pulse 80 ms (paper characterisation 70 ms)'),
     'primitive_period': ('s', 'DESIGN.md: one primitive per 1.5 s'),
     'limb_curl_direction': ('-', "'forward' = the relaxed curl turns a lateral limb toward the front, i.e. "

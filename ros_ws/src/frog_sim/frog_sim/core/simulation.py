@@ -221,12 +221,37 @@ class FrogSimulation:
         """Kick strength factor of each limb (1 = nominal)."""
         return {l: float(getattr(self, '_limb_strength', {}).get(l, 1.0)) for l in LIMB_NAMES}
 
+    def set_kick_variability(self, sd: float, seed: int | None = None) -> None:
+        """Let every firing vary: each limb fired by :meth:`fire_limbs` or :meth:`execute_primitive`
+        kicks with its strength times an independent factor ``N(1, sd)`` (clipped to 0.2-2).
+
+        The real robot's kicks differ from one to the next (SMA heating with the battery's
+        charge and the water temperature, the wire's contact): on the straight runs its
+        heading wanders by several degrees per B period, which a symmetric kick cannot do.
+        The factor holds until that limb fires again; scheduled sequences
+        (:meth:`set_schedule`) are not varied. ``sd = 0`` turns it off.
+        """
+        if not (np.isfinite(sd) and 0.0 <= sd < 1.0):
+            raise ValueError(f'kick variability sd = {sd!r} must be in [0, 1)')
+        self._kick_sd = float(sd)
+        self._kick_rng = np.random.default_rng(seed)
+        self._firing_factor = {}
+        self._apply_limb_strength()
+
+    def _draw_kicks(self, limbs) -> None:
+        if getattr(self, '_kick_sd', 0.0) <= 0.0:
+            return
+        for limb in limbs:
+            self._firing_factor[limb] = float(np.clip(1.0 + self._kick_sd * self._kick_rng.standard_normal(), 0.2, 2.0))
+        self._apply_limb_strength()
+
     def _apply_limb_strength(self) -> None:
         # eq. 9 rows: c1/(1 + exp(-c2 (t - c3))) + c4 for heating (0-3) and cooling (4-7);
         # scaling c1 and c4's offset from rest scales the whole excursion, keeping the rest
         rows = self._nominal_rows.copy()
+        firing = getattr(self, '_firing_factor', {})
         for lid, limb in enumerate(LIMB_NAMES):
-            s = self.limb_strength[limb]
+            s = self.limb_strength[limb] * firing.get(limb, 1.0)
             if s != 1.0:
                 rest = profile_value(rows[lid], -1.0)
                 for c1, c4 in ((0, 3), (4, 7)):
@@ -283,6 +308,7 @@ class FrogSimulation:
         """
         start = self.time if start is None else float(start)
         extra = ActivationSchedule.primitive(primitive, start, self.params.pulse_duration)
+        self._draw_kicks([l for l in LIMB_NAMES if len(extra.times(l))])
         if self._gait is not None:
             self._schedule = self._schedule.merged(self._gait_schedule(until=self.time))
             self._gait = None
@@ -293,6 +319,7 @@ class FrogSimulation:
     def fire_limbs(self, limbs, start: float | None = None) -> None:
         """Fire the named limbs (e.g. ``['FL', 'BR']``) at ``start`` (default now)."""
         start = self.time if start is None else float(start)
+        self._draw_kicks(limbs)
         extra = ActivationSchedule({l: [start] for l in limbs})
         self._schedule = self._schedule.merged(extra)
         self._sync_schedule(force=True)

@@ -27,11 +27,11 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
-from frog_sim.core.model_parameters import FrogParameters
+from frog_sim.core.model_parameters import PARAMETER_SOURCES, FrogParameters
 from frog_sim.core.schedules import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import DEFAULT_TIME_STEP, ConvergenceError, FrogSimulation
 
@@ -61,7 +61,10 @@ _NODE_PARAMS = [
     Param("gait_duration_s", 0.0, "stop the gait after this long [s]; 0 = forever", min=0.0, max=1e6),
     Param("limb_strength_sd", 0.0, "relative spread of the four limbs' kick strengths: each limb's factor is "
           "drawn once from N(1, sd^2) with seed (real limbs differ); 0 = nominal", min=0.0, max=0.5),
-    Param("seed", 0, "random seed of the limb strengths", min=0, max=2**31 - 1),
+    Param("kick_strength_sd", 0.0, "relative spread of each firing's kick: every fired limb kicks with its strength "
+          "times a factor drawn from N(1, sd^2) per firing (real kicks vary from one to the next); 0 = none",
+          min=0.0, max=0.5),
+    Param("seed", 0, "random seed of the limb strengths and the kick variability", min=0, max=2**31 - 1),
     Param("duration_s", 0.0, "stop simulating (keep publishing the last state) after this simulated time "
           "[s]; 0 = run forever", min=0.0, max=1e7),
 ]
@@ -78,9 +81,10 @@ def _model_params(defaults: FrogParameters) -> list:
         lo, hi = f.metadata.get("range", (None, None))
         unit = f.metadata.get("unit", "")
         choices = f.metadata.get("choices")
+        source = PARAMETER_SOURCES.get(f.name, ("", f"FrogParameters.{f.name}"))[1]
         rows.append(Param(f.name, getattr(defaults, f.name),
-                          f"FrogParameters.{f.name}{' [' + unit + ']' if unit not in ('', '-') else ''} (see "
-                          f"frog_sim/core/model_parameters.py)", lo, hi, tuple(choices) if choices else None))
+                          f"{f.name.replace('_', ' ')}{' [' + unit + ']' if unit not in ('', '-') else ''}: "
+                          f"{source}", lo, hi, tuple(choices) if choices else None))
     return rows
 
 
@@ -96,6 +100,7 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("sim_node", **kwargs)
+        self.gate = MessageGate(self)     # non-finite, unstamped or oversized commands are refused
         defaults = FrogParameters()
         p = declare_parameters(self, _NODE_PARAMS, on_change=self.on_parameters)
         self.cfg = p
@@ -108,6 +113,8 @@ class SimNode(Node):
                 rng = np.random.default_rng(p["seed"])
                 factors = np.clip(1.0 + p["limb_strength_sd"] * rng.standard_normal(len(LIMB_NAMES)), 0.2, 2.0)
                 self.sim.set_limb_strength(dict(zip(LIMB_NAMES, factors.tolist())))
+            if p["kick_strength_sd"] > 0:
+                self.sim.set_kick_variability(p["kick_strength_sd"], seed=p["seed"] + 1)
             if p["gait_frequency_hz"] > 0:
                 self.sim.set_gait(p["gait_frequency_hz"], p["gait_phase_offset"],
                                   duration=p["gait_duration_s"] or None)
@@ -161,8 +168,10 @@ class SimNode(Node):
 
     def on_parameters(self, changed: dict) -> None:
         if "real_time_factor" in changed:
-            # re-anchor the pacing so the new rate applies from now on, without a jump
+            # re-anchor the pacing so the new rate applies from now on, without a jump (and the
+            # diagnostics' real-time factors, which are measured since the anchor)
             self.wall_start, self.sim_start = time.monotonic(), self.sim.time
+            self.step_wall_s = 0.0
 
     # -- simulation loop -----------------------------------------------------------------
     def _target_time(self) -> float:
@@ -259,6 +268,8 @@ class SimNode(Node):
 
     # -- commands ------------------------------------------------------------------------
     def on_primitive(self, msg) -> None:
+        if self.gate.refused("frog/primitive", msg, stamped=False):
+            return
         if msg.id >= len(PRIMITIVE_NAMES):
             self.get_logger().error(f"rejected primitive id {msg.id}: out of range 0-8")
             return
@@ -281,6 +292,8 @@ class SimNode(Node):
             self.get_logger().error(f"rejected limb activation: pulse_duration "
                                     f"{msg.pulse_duration!r} s must be in [0, 1]")
             return
+        if self.gate.refused("frog/limb_activation", msg, stamped=False):
+            return
         if limbs and self.error is None:
             # The measured curvature profile already contains the hardware pulse.
             self.sim.fire_limbs([LIMB_NAMES[i] for i in limbs])
@@ -297,6 +310,7 @@ class SimNode(Node):
         self.error = None
         self.next_odom = self.next_shape = 0.0
         self.wall_start, self.sim_start = time.monotonic(), self.sim.time
+        self.step_wall_s = 0.0
         self.publish_state(force=True)
         response.success, response.message = True, "simulation reset to the initial pose"
         self.get_logger().info(f"reset to the initial pose at world time {self.world_time:.3f} s")

@@ -14,6 +14,7 @@ import sys
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import CameraInfo, Image
+from soft_robot_common.diagnostics import ERROR, OK, WARN, NodeDiagnostics
 from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
 
 from frog_vision.core.camera_model import CameraModel
@@ -21,7 +22,8 @@ from frog_vision.nodes.common import load_camera
 from frog_vision.nodes.messages import array_to_image, camera_info_msg
 
 PARAMS = [
-    Param("source", "/dev/video0", "camera: a device path or index, a video file, or 'realsense'"),
+    Param("source", "/dev/video0", "camera: a device path or index (0 or '0'), a video file, or 'realsense'",
+          ints_as_text=True),
     Param("width", 640, "requested frame width [px]", min=16, max=8192),
     Param("height", 480, "requested frame height [px]", min=16, max=8192),
     Param("fps", 30.0, "requested frame rate [Hz]", min=1.0, max=240.0),
@@ -30,7 +32,8 @@ PARAMS = [
     Param("frame_id", "camera", "frame of the images"),
     Param("loop", False, "restart a video file at its end"),
     Param("retry", False, "keep retrying a source that cannot be opened or stops delivering"),
-    Param("retry_period_s", 2.0, "[s]", min=0.1, max=60.0),
+    Param("retry_period_s", 2.0, "with retry: seconds between attempts to open a camera that failed or was "
+          "lost [s]", min=0.1, max=60.0),
 ]
 
 
@@ -108,12 +111,26 @@ class CameraNode(Node):
         self.cfg = p
         self.model = load_camera(p["camera_info_file"])
         self.source = None
+        self.source_error = ""
         self.warned_uncalibrated = False
         self._open(first=True)
         self.image_pub = self.create_publisher(Image, "camera/image_raw", QoSProfile(depth=2))
         self.info_pub = self.create_publisher(CameraInfo, "camera/camera_info", QoSProfile(depth=2))
         self.create_timer(1.0 / p["fps"], self.tick)
         self.retry_timer = self.create_timer(p["retry_period_s"], self._retry)
+        self.frames = 0
+        self._diag_frames = 0
+        self.diagnostics = NodeDiagnostics(self, "camera", self._diagnostics, hardware_id=str(p["source"]))
+
+    def _diagnostics(self):
+        new, self._diag_frames = self.frames - self._diag_frames, self.frames
+        values = {"source": self.cfg["source"], "frames": self.frames, "frames_last_period": new}
+        if self.source is None:
+            what = f"retrying every {self.cfg['retry_period_s']:g} s" if self.cfg["retry"] else "not retrying"
+            return ERROR, f"camera source not open ({self.source_error or 'ended'}); {what}", values
+        if new == 0:
+            return WARN, "waiting for frames from the camera source", values
+        return OK, "publishing frames", values
 
     def _open(self, first=False) -> None:
         p = self.cfg
@@ -125,6 +142,7 @@ class CameraNode(Node):
             self.get_logger().info(f"camera source {p['source']!r} open")
         except OSError as exc:
             self.source = None
+            self.source_error = str(exc)
             if first and not p["retry"]:
                 raise ConfigurationError(str(exc)) from exc
             self.get_logger().error(f"{exc}; retrying every {p['retry_period_s']:g} s")
@@ -165,6 +183,7 @@ class CameraNode(Node):
                 self.warned_uncalibrated = True
         stamp = self.get_clock().now().to_msg()
         self.image_pub.publish(array_to_image(frame, stamp, self.cfg["frame_id"]))
+        self.frames += 1
         self.info_pub.publish(camera_info_msg(self.model, stamp, self.cfg["frame_id"]))
 
 

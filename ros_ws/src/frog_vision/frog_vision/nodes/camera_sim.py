@@ -22,7 +22,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, Param, declare_parameters, message_problem, run_node
 from visualization_msgs.msg import Marker
 
 from frog_vision.core.camera_model import CameraModel
@@ -84,6 +84,9 @@ class CameraSimNode(Node):
         self.tag_offset = None
         self.frames = 0
         self.skipped = 0
+        self._diag_refused = 0
+        self.refused = 0                 # messages refused by the common rule (non-finite, unstamped)
+        self.last_refusal = ""
         self.next_capture = None
         self.waiting_logged = False
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
@@ -97,13 +100,27 @@ class CameraSimNode(Node):
         self.get_logger().info(f"rendering {camera.width}x{camera.height} at {p['fps']:g} fps "
                                f"(tag {p['tag_family']} id {p['tag_id']}, noise {p['noise_sigma']:g})")
 
+    def _refuse(self, what: str, msg) -> bool:
+        """Log and count ``msg`` if the common rule refuses it (True: refused)."""
+        problem = message_problem(msg, self.get_clock().now().nanoseconds)
+        if problem is None:
+            return False
+        self.refused += 1
+        self.last_refusal = f"{what} refused: {problem}"
+        self.get_logger().warn(self.last_refusal, throttle_duration_sec=2.0)
+        return True
+
     def on_odom(self, msg: Odometry) -> None:
+        if self._refuse("frog/sim/odom", msg):
+            return
         p = msg.pose.pose
         tw = msg.twist.twist
         self.odom.append((stamp_to_s(msg.header.stamp), np.array([p.position.x, p.position.y, yaw_of(p.orientation)]),
                           np.array([tw.linear.x, tw.linear.y, tw.angular.z])))
 
     def on_shape(self, msg: Marker) -> None:
+        if self._refuse("frog/sim/shape", msg):
+            return
         if msg.type != Marker.LINE_LIST or len(msg.points) < 6 or len(msg.points) % 2:
             self.get_logger().error(f"ignored shape: expected a LINE_LIST with an even number of points, got type "
                                     f"{msg.type} with {len(msg.points)} points")
@@ -175,9 +192,17 @@ class CameraSimNode(Node):
         frames, busy = self.frames - self._diag_frames, self.busy_s - self._diag_busy
         span = wall - self._diag_wall
         self._diag_frames, self._diag_busy, self._diag_wall = self.frames, self.busy_s, wall
+        recent_refusal = self.refused > self._diag_refused
+        self._diag_refused = self.refused
+        level = DiagnosticStatus.OK if self.odom and frames and not recent_refusal else DiagnosticStatus.WARN
+        if recent_refusal:
+            text = self.last_refusal
+        elif not self.odom:
+            text = "waiting for frog/sim/odom"
+        else:
+            text = "rendering" if frames else "no frame rendered: waiting for odometry at the capture times"
         status = DiagnosticStatus(name=f"{self.get_name()}: camera simulator", hardware_id="camera_sim",
-                                  level=DiagnosticStatus.OK if self.odom else DiagnosticStatus.WARN,
-                                  message="rendering" if self.odom else "waiting for frog/sim/odom")
+                                  level=level, message=text)
         status.values = [KeyValue(key="frames", value=str(self.frames)),
                          KeyValue(key="frames_per_wall_s", value=f"{frames / span:.1f}" if span > 0 else "nan"),
                          KeyValue(key="render_publish_ms",
@@ -185,7 +210,8 @@ class CameraSimNode(Node):
                          KeyValue(key="cpu_ms_mean", value=f"{self.cpu_s / max(self.frames, 1) * 1e3:.2f}"),
                          KeyValue(key="render_ms_mean", value=f"{self.render_s / max(self.frames, 1) * 1e3:.2f}"),
                          KeyValue(key="frames_skipped", value=str(self.skipped)),
-                         KeyValue(key="shape_received", value=str(self.shape is not None))]
+                         KeyValue(key="shape_received", value=str(self.shape is not None)),
+                         KeyValue(key="messages_refused", value=str(self.refused))]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(msg)

@@ -307,13 +307,13 @@ class RobotKinematics:
 
     def waypoints(self, curve: str = '', n: int = 0, points=None) -> np.ndarray:
         """Waypoints (N, 3) of a built-in curve (``n`` samples, 0 = default) or checked points."""
+        if n and not 2 <= n <= MAX_WAYPOINTS:      # a count out of bounds is refused whatever the mode
+            raise RequestError(f"n_waypoints {n} must be 0 (default) or in 2-{MAX_WAYPOINTS}")
         if curve:
             if curve not in CURVES:
                 raise RequestError(f"unknown curve {curve!r}; built-in curves: {', '.join(sorted(CURVES))}")
             if self.mesh.info.get('model') != 'tendon_finger':
                 raise RequestError("the built-in curves lie in the finger's workspace; give waypoints for this robot")
-            if n and not 2 <= n <= MAX_WAYPOINTS:
-                raise RequestError(f"n_waypoints {n} must be 0 (default) or in 2-{MAX_WAYPOINTS}")
             return CURVES[curve](n) if n else CURVES[curve]()
         P = np.asarray(points if points is not None else [], float).reshape(-1, 3)
         if len(P) == 0:

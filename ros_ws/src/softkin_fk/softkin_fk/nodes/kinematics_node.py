@@ -29,7 +29,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
 from soft_robot_interfaces.action import FollowCurve
 from soft_robot_interfaces.srv import ForwardKinematics, SolveIk
 from visualization_msgs.msg import Marker
@@ -76,6 +76,7 @@ class KinematicsNode(Node):
 
     def __init__(self):
         super().__init__(self.NODE_NAME)
+        self.gate = MessageGate(self)     # non-finite, unstamped or oversized requests are refused
         p = self.p = declare_parameters(self, PARAMS, on_change=self._on_change)
         log = self.get_logger()
         t0 = time.perf_counter()
@@ -167,6 +168,12 @@ class KinematicsNode(Node):
     # --- streamed targets -----------------------------------------------------------------
     def _on_target(self, msg: PointStamped) -> None:
         log = self.get_logger()
+        problem = self.gate.problem(msg, stamped=False)
+        if problem:
+            self._stats["refused"] += 1
+            if self.gate.should_log("finger/target", problem):
+                log.error(f"target refused: {problem}")
+            return
         if msg.header.frame_id not in ("", self.frame):
             log.error(f"target refused: frame '{msg.header.frame_id}' is not the base frame '{self.frame}'")
             return
@@ -203,6 +210,11 @@ class KinematicsNode(Node):
 
     # --- services -------------------------------------------------------------------------
     def _srv_fk(self, req, res):
+        problem = self.gate.problem(req, stamped=False)
+        if problem:
+            res.success, res.message = False, f"refused: {problem}"
+            self.get_logger().error(f"forward_kinematics {res.message}")
+            return res
         try:
             fk = self.worker.call(lambda: self.kin.forward(list(req.actuation)))
         except RequestError as exc:
@@ -223,6 +235,15 @@ class KinematicsNode(Node):
 
     def _srv_ik(self, req, res):
         t = req.target
+        try:
+            check_tolerance(req.tolerance, self.kin.settings.lam)    # its own message first
+            problem = self.gate.problem(req, stamped=False)
+        except (RequestError, ValueError) as exc:
+            problem = str(exc)
+        if problem:
+            res.success, res.message = False, f"refused: {problem}"
+            self.get_logger().error(f"solve_ik {res.message}")
+            return res
 
         def solve():
             r = self.kin.inverse([t.x, t.y, t.z], initial=list(req.initial_guess),
@@ -285,6 +306,9 @@ class KinematicsNode(Node):
                 raise RequestError(f"frame '{g.frame_id}' is not the base frame '{self.frame}'")
             lam = check_tolerance(g.tolerance, self.kin.settings.lam)
             P = self.kin.waypoints(g.curve, int(g.n_waypoints), [[w.x, w.y, w.z] for w in g.waypoints])
+            problem = self.gate.problem(g, stamped=False)      # whatever the checks above did not see
+            if problem:
+                raise RequestError(problem)
         except RequestError as exc:
             result.message = f"goal refused: {exc}"
             log.error(f"follow_curve {result.message}")

@@ -14,6 +14,8 @@ numbers to 0, motors stay), ``~/inject_error`` (an ``Error:`` line), ``~/corrupt
 """
 from __future__ import annotations
 
+import dataclasses
+
 import os
 import select
 import threading
@@ -24,14 +26,17 @@ import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import (ConfigurationError, NodeDiagnostics, Param, PathClaim, declare_parameters,
+                               namespaced_path, run_node)
 from std_srvs.srv import Trigger
 
 from ..core.marlin_board import MarlinBoard
 from ..core.stepper import CableMotorMap
 
 PARAMS = [
-    Param("port_link", "/tmp/softkin_marlin", "path of a symlink to the emulated board's serial device"),
+    Param("port_link", "/tmp/softkin_marlin", "path of a symlink to the emulated board's serial device; default "
+          "/tmp/softkin_marlin in the root namespace, /tmp/softkin_marlin_<ns> in /<ns>; refused if another live "
+          "emulator holds it"),
     Param("joints", ["cable_0", "cable_1", "cable_2"], "cable (joint) names, one per axis"),
     Param("axes", ["X", "Y", "Z"], "Marlin axis letter of each cable"),
     Param("pulley_radius", 0.005, "radius the cables wind on [m]", min=1e-4, max=0.1),
@@ -49,7 +54,9 @@ class MarlinEmulator(Node):
 
     def __init__(self):
         super().__init__(self.NODE_NAME)
-        p = self.p = declare_parameters(self, PARAMS)
+        p = self.p = declare_parameters(self, [dataclasses.replace(r, default=namespaced_path(r.default,
+                                                                                        self.get_namespace()))
+                                               if r.name == "port_link" else r for r in PARAMS])
         self.map = CableMotorMap(joints=list(p["joints"]), axes=list(p["axes"]), pulley_radius=p["pulley_radius"],
                                  steps_per_rev=p["steps_per_rev"], microsteps=p["microsteps"],
                                  steps_per_unit=p["steps_per_unit"])
@@ -59,7 +66,14 @@ class MarlinEmulator(Node):
         self.board = MarlinBoard(axes=self.map.axes, steps_per_unit=p["steps_per_unit"], buffer_size=p["buffer_size"])
         self._lock = threading.Lock()
         self._fd = self._slave = None
-        self._transcript = open(p["transcript"], "a", buffering=1) if p["transcript"] else None
+        link = p["port_link"]
+        if os.path.lexists(link) and not os.path.islink(link):
+            raise ConfigurationError(f"port_link {link!r} exists and is not a symbolic link; refusing to replace it")
+        self._claim = PathClaim(link, "port_link")      # also: the folder must exist
+        try:
+            self._transcript = open(p["transcript"], "a", buffering=1) if p["transcript"] else None
+        except OSError as exc:
+            raise ConfigurationError(f"transcript {p['transcript']!r}: {exc.strerror}") from None
         self._plug()
         self.pub_state = self.create_publisher(JointState, "finger/emulator/motor_state", 10)
         self.pub_end = self.create_publisher(JointState, "finger/emulator/move_end", 100)
@@ -70,6 +84,8 @@ class MarlinEmulator(Node):
         self._running = True
         self._thread = threading.Thread(target=self._serve, name="marlin_pty", daemon=True)
         self._thread.start()
+        self.lines_received = 0
+        self.diagnostics = NodeDiagnostics(self, "emulated board", self._diagnostics, hardware_id=p["port_link"])
         self.get_logger().info(f"emulated Marlin board on {p['port_link']} -> {self._device}")
 
     # --- the pty ------------------------------------------------------------------------
@@ -124,6 +140,7 @@ class MarlinEmulator(Node):
                         if self._transcript is not None:
                             self._transcript.write(f"{now:.6f} {line}\n")
                         self.board.receive(line, now)
+                        self.lines_received += 1
                 self.board.tick(now)
                 out = self.board.take_output()
                 ends = self.board.take_completed()
@@ -134,6 +151,16 @@ class MarlinEmulator(Node):
                     pass
             for t_end, steps in ends:   # stamped when the model's move ended, however late the thread woke
                 self.pub_end.publish(self._state(steps, np.zeros(len(steps)), age=time.monotonic() - t_end))
+
+    def _diagnostics(self):
+        from soft_robot_common.diagnostics import OK, WARN
+        values = {"port_link": self.p["port_link"], "device": self._device if self._fd is not None else "",
+                  "lines_received": self.lines_received}
+        if self._fd is None:
+            return WARN, "unplugged (fault injected): waiting for ~/replug", values
+        if self.lines_received == 0:
+            return OK, "waiting for G-code from the host", values
+        return OK, "running", values
 
     # --- publishing ---------------------------------------------------------------------
     def _state(self, steps, speed, age: float = 0.0) -> JointState:
@@ -194,8 +221,11 @@ class MarlinEmulator(Node):
         self._running = False
         if getattr(self, "_thread", None) is not None:
             self._thread.join(1.0)
-        self._close_pty()
-        if self._transcript is not None:
+        if getattr(self, "_fd", None) is not None or getattr(self, "_device", None):
+            self._close_pty()
+        if getattr(self, "_claim", None) is not None:
+            self._claim.release()
+        if getattr(self, "_transcript", None) is not None:
             self._transcript.close()
         return super().destroy_node()
 

@@ -19,6 +19,8 @@ reconnects, re-initialises and restores the last reported position with ``G92``.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import threading
 import time
 
@@ -28,14 +30,15 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, namespaced_path, run_node
 from std_srvs.srv import Trigger
 
 from ..core.marlin import GcodeSender, format_axes, parse_reply
 from ..core.stepper import CableMotorMap
 
 PARAMS = [
-    Param("port", "/tmp/softkin_marlin", "serial device of the Marlin board (e.g. /dev/ttyACM0)"),
+    Param("port", "/tmp/softkin_marlin", "serial device of the Marlin board (e.g. /dev/ttyACM0); default "
+          "marlin_emulator's link in this namespace: /tmp/softkin_marlin in /, /tmp/softkin_marlin_<ns> in /<ns>"),
     Param("baud", 115200, "serial baud rate", min=1200, max=4000000),
     Param("joints", ["cable_0", "cable_1", "cable_2"], "cable (joint) names of the setpoints, one per axis"),
     Param("axes", ["X", "Y", "Z"], "Marlin axis letter of each cable"),
@@ -66,7 +69,11 @@ class StepperDriver(Node):
 
     def __init__(self):
         super().__init__(self.NODE_NAME)
-        p = self.p = declare_parameters(self, PARAMS, on_change=self._on_change)
+        self.gate = MessageGate(self)     # non-finite, unstamped or oversized setpoints are refused
+        p = self.p = declare_parameters(self, [dataclasses.replace(r, default=namespaced_path(r.default,
+                                                                                        self.get_namespace()))
+                                               if r.name == "port" else r for r in PARAMS],
+                                        on_change=self._on_change)
         self.map = CableMotorMap(joints=list(p["joints"]), axes=list(p["axes"]), pulley_radius=p["pulley_radius"],
                                  steps_per_rev=p["steps_per_rev"], microsteps=p["microsteps"],
                                  steps_per_unit=p["steps_per_unit"], min_pull=p["min_pull"], max_pull=p["max_pull"],
@@ -76,7 +83,8 @@ class StepperDriver(Node):
             raise ConfigurationError(problem)
         self._lock = threading.Lock()
         self.sender = GcodeSender(window=p["window"])
-        self.state = "disconnected"       # disconnected | connecting | ready | stopped
+        self.state = "disconnected"       # disconnected | connecting | ready | stopped | halted
+        self._halt_line = ""              # Marlin's kill() message while halted (until its reset banner)
         self._ser = None
         n = len(self.map.joints)
         self.commanded = np.zeros(n, np.int64)   # steps of the last queued move (board's plan)
@@ -117,6 +125,11 @@ class StepperDriver(Node):
             self.get_logger().error(f"setpoint refused: {why}")
 
     def _on_setpoint(self, msg: JointState) -> None:
+        problem = self.gate.problem(msg, stamped=False)   # a zero stamp on a command means now
+        if problem:
+            self.stats["refused"] += 1
+            self.gate.refuse("setpoint", problem)
+            return
         joints = self.map.joints
         if len(msg.name) != len(msg.position) or sorted(msg.name) != sorted(joints):
             self._refuse(f"names {list(msg.name)} with {len(msg.position)} positions do not match the joints {joints}")
@@ -153,7 +166,7 @@ class StepperDriver(Node):
         with self._lock:
             dropped = self.sender.abort()
             written = False
-            if self._ser is not None and self.state in ("ready", "stopped"):
+            if self._ser is not None and self.state in ("ready", "stopped", "halted"):
                 try:
                     self._ser.write((self.sender.send_unnumbered("M410") + "\n").encode("ascii"))
                     written = True
@@ -297,7 +310,13 @@ class StepperDriver(Node):
                     self._initialise()
             elif r.kind == "error":
                 self.stats["errors"] += 1
-                log.warn(f"board: {line}")
+                if any(w in line for w in ("halted", "kill() called", "stopped due to errors")):
+                    # Marlin's kill(): the board ignores motion until it is reset
+                    self.state, self._halt_line = "halted", line
+                    log.error(f"board halted ({line}): setpoints are refused until the board is reset "
+                              "(reset button, power, or reconnect)")
+                else:
+                    log.warn(f"board: {line}")
             elif r.kind == "echo":
                 if "Unknown command" in line:
                     self.stats["unknown"] += 1
@@ -348,8 +367,11 @@ class StepperDriver(Node):
     # --- diagnostics / shutdown ---------------------------------------------------------
     def _publish_diagnostics(self) -> None:
         level = {"ready": DiagnosticStatus.OK, "connecting": DiagnosticStatus.WARN,
-                 "disconnected": DiagnosticStatus.ERROR}.get(self.state, DiagnosticStatus.WARN)
+                 "disconnected": DiagnosticStatus.ERROR, "halted": DiagnosticStatus.ERROR}.get(self.state,
+                                                                                              DiagnosticStatus.WARN)
         state = "stopped" if self._stopped else self.state
+        if self.state == "halted":
+            state = f"halted ({self._halt_line}): waiting for the board's reset"
         with self._lock:
             vals = dict(port=self.p["port"], link=state, queue_depth=self.sender.queue_depth,
                         in_flight=len(self.sender.in_flight), resends=self.sender.resends, **self.stats)

@@ -1,0 +1,378 @@
+"""A generated walk of bad inputs through the actuating nodes (issue 23, "Deliver").
+
+For every subscription, service and action of bridge_node, sim_node, kinematics_node,
+stepper_driver and planner_node, the walk takes a valid input that *would* actuate and
+spoils one field at a time: NaN, +inf and -inf in every float (and in the first element of
+every float array), empty and huge (100,001 elements) arrays, the largest value of every
+unsigned count, and a zero stamp where the input is a state estimate (odometry; a command
+with a zero stamp means "now", as ``ros2 topic pub`` sends it). After the walk it asserts
+that the node is alive and answers its parameter services, that nothing was actuated (no
+``h`` line on the pty, no setpoint, no G1 written, no motion, no kick chosen), and that every
+spoiled input was refused (a service or goal answered with a refusal, or a refusal logged
+for the input); then the same valid input is sent once and must actuate (the detector works).
+Totals go to ``bad_input_walk.json`` in the test's folder and are printed.
+"""
+
+from __future__ import annotations
+
+import array
+import json
+import math
+import os
+import re
+import time
+
+import numpy as np
+import pytest
+from rclpy.action import ActionClient
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+pytestmark = pytest.mark.system
+
+QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+HUGE = 100_001
+REFUSAL = re.compile(r"refus|reject|ignor|invalid|non-finite|must be|out of range|not finite|is nan|is inf")
+TOTALS: dict = {}
+
+
+# -- generating the variants -------------------------------------------------------------------
+
+def _fields(msg, prefix=""):
+    """(path, kind, value) of every leaf of a message instance; kind: float, floats, msgs, uint, stamp."""
+    out = []
+    types = type(msg).get_fields_and_field_types()
+    for name, typ in types.items():
+        value = getattr(msg, name)
+        path = prefix + name
+        if typ == "builtin_interfaces/Time":
+            out.append((path, "stamp", value))
+        elif isinstance(value, float):
+            out.append((path, "float", value))
+        elif hasattr(type(value), "get_fields_and_field_types"):
+            out += _fields(value, path + ".")
+        elif typ.startswith("sequence<double") or typ.startswith("double[") or typ.startswith("sequence<float"):
+            out.append((path, "floats", value))
+        elif typ.startswith("sequence<") and "/" in typ:
+            out.append((path, "msgs", typ[len("sequence<"):].rstrip(">").split(",")[0]))
+        elif typ.startswith("sequence<uint8") or typ.startswith("sequence<octet"):
+            out.append((path, "bytes", value))
+        elif typ in ("uint8", "uint16", "uint32", "uint64", "octet"):
+            out.append((path, "uint", typ))
+    return out
+
+
+def _set(msg, path, value):
+    *parents, leaf = path.split(".")
+    obj = msg
+    for p in parents:
+        obj = getattr(obj, p)
+    setattr(obj, leaf, value)
+
+
+def _get(msg, path):
+    obj = msg
+    for p in path.split("."):
+        obj = getattr(obj, p)
+    return obj
+
+
+def _element_type(name):
+    import importlib
+    parts = name.split("/")
+    pkg, cls = parts[0], parts[-1]
+    return getattr(importlib.import_module(f"{pkg}.msg"), cls)
+
+
+def variants(make, stamped: bool):
+    """``[(label, message)]``: ``make()`` with one field spoiled per entry."""
+    out = []
+    for path, kind, info in _fields(make()):
+        if kind == "float":
+            for bad in (math.nan, math.inf, -math.inf):
+                m = make()
+                _set(m, path, bad)
+                out.append((f"{path}={bad}", m))
+        elif kind == "floats":
+            n = len(info)
+            for label, bad in (("nan", math.nan), ("inf", math.inf)):
+                m = make()
+                vals = list(_get(m, path)) or [0.0]
+                vals[0] = bad
+                _set(m, path, np.array(vals) if n and not isinstance(info, (list, array.array)) else vals)
+                out.append((f"{path}[0]={label}", m))
+            if not hasattr(info, "shape"):                 # variable length: empty and huge
+                for label, vals in (("empty", []), ("huge", [0.0] * HUGE)):
+                    m = make()
+                    _set(m, path, vals)
+                    out.append((f"{path}={label}", m))
+        elif kind == "msgs":
+            cls = _element_type(info)
+            bad_item = cls()
+            first = [p for p, k, _ in _fields(bad_item) if k == "float"]
+            if first:
+                _set(bad_item, first[0], math.nan)
+                m = make()
+                _set(m, path, [bad_item] + list(_get(m, path))[1:])
+                out.append((f"{path}[0].{first[0]}=nan", m))
+            for label, vals in (("empty", []), ("huge", [cls() for _ in range(HUGE)])):
+                m = make()
+                _set(m, path, vals)
+                out.append((f"{path}={label}", m))
+        elif kind == "bytes":
+            for label, vals in (("empty", []), ("huge", [0] * HUGE)):
+                m = make()
+                _set(m, path, vals)
+                out.append((f"{path}={label}", m))
+        elif kind == "uint":
+            m = make()
+            _set(m, path, {"uint8": 255, "octet": b"\xff", "uint16": 65535, "uint32": 2**32 - 1,
+                           "uint64": 2**64 - 1}[info])
+            out.append((f"{path}=max", m))
+        elif kind == "stamp" and stamped:
+            m = make()
+            _set(m, path, type(info)())
+            out.append((f"{path}=0", m))
+    return out
+
+
+def _same_as_valid(m, make):
+    """A variant identical to the valid input (e.g. an empty array that was already empty)."""
+    from rclpy.serialization import serialize_message
+    try:
+        return serialize_message(m) == serialize_message(make())
+    except Exception:
+        return False
+
+
+# -- the walk ---------------------------------------------------------------------------------
+
+class Walk:
+    def __init__(self, probe, node_name, proc):
+        self.probe, self.node_name, self.proc = probe, node_name, proc
+        self.rows = []          # (input, label, refused)
+
+    def topic(self, topic, msg_type, make, stamped=False, settle=0.05):
+        pub = self.probe.node.create_publisher(msg_type, topic, QOS)
+        self.probe.wait_for_subscriber(topic, timeout=30)
+        self.probe.spin_for(0.3)
+        for label, msg in variants(make, stamped):
+            if _same_as_valid(msg, make):
+                continue
+            before = len(self.proc.log_text())
+            msg_stamp = getattr(msg, "header", None)
+            if msg_stamp is not None and not label.startswith("header.stamp"):
+                msg.header.stamp = self.probe.node.get_clock().now().to_msg()
+            pub.publish(msg)
+            end = time.monotonic() + 3.0
+            refused = False
+            while time.monotonic() < end:         # a refusal is logged (or rate-limited: counted below)
+                self.probe.spin_for(settle)
+                new = self.proc.log_text()[before:]
+                if REFUSAL.search(new):
+                    refused = True
+                    break
+                if time.monotonic() > end - 2.0 and new == "":
+                    break                          # nothing logged: probably rate-limited; see below
+            self.rows.append((topic, label, refused))
+        return pub
+
+    def service(self, name, srv_type, make):
+        client = self.probe.node.create_client(srv_type, name)
+        self.probe.wait_for_service(client, timeout=30)
+        for label, req in variants(make, stamped=False):
+            if _same_as_valid(req, make):
+                continue
+            res = self.probe.call(client, req, timeout=60)
+            refused = (not res.success) and REFUSAL.search(res.message or "") is not None
+            self.rows.append((name, label, refused))
+
+    def action(self, name, action_type, make):
+        client = ActionClient(self.probe.node, action_type, name)
+        self.probe.spin_until(client.server_is_ready, 30, f"action {name}")
+        for label, goal in variants(make, stamped=False):
+            if _same_as_valid(goal, make):
+                continue
+            fut = client.send_goal_async(goal)
+            self.probe.spin_until(fut.done, 60, "goal response")
+            handle = fut.result()
+            refused = not handle.accepted
+            if handle.accepted:
+                res = handle.get_result_async()
+                self.probe.spin_until(res.done, 120, "goal result")
+                r = res.result().result
+                refused = not r.success and REFUSAL.search(r.message or "") is not None
+            self.rows.append((name, label, refused))
+
+    def alive(self):
+        from rcl_interfaces.srv import ListParameters
+        client = self.probe.node.create_client(ListParameters, f"{self.node_name}/list_parameters")
+        self.probe.wait_for_service(client, timeout=10)
+        reply = self.probe.call(client, ListParameters.Request(), timeout=10)
+        return self.proc.running() and len(reply.result.names) > 0
+
+    def finish(self, actuations: int, tmp_path):
+        """Non-finite values must be refused; an empty array, a huge count or a zero stamp may
+        instead be accepted as harmless (e.g. no limbs = nothing to fire, an empty initial guess
+        = the default), provided nothing was actuated."""
+        text = self.proc.log_text()
+        accepted = [(i, label) for i, label, r in self.rows if not r]
+        unrefused = [(i, label) for i, label in accepted if re.search(r"=(nan|inf|-inf)$", label)]
+        fields = {(i, label.split("=")[0]) for i, label, _ in self.rows}
+        TOTALS[self.node_name] = dict(inputs=len({i for i, _, _ in self.rows}), fields=len(fields),
+                                      values_tried=len(self.rows), refusals=len(self.rows) - len(accepted),
+                                      accepted_harmless=len(accepted) - len(unrefused), actuations=actuations,
+                                      accepted=accepted)
+        path = tmp_path.parent / "bad_input_walk.json"
+        old = json.loads(path.read_text()) if path.exists() else {}
+        old.update(TOTALS)
+        path.write_text(json.dumps(old, indent=1))
+        print(f"\nbad-input walk {self.node_name}: " + json.dumps(TOTALS[self.node_name]))
+        assert "Traceback" not in text, text[-3000:]
+        assert self.alive()
+        assert actuations == 0
+        assert not unrefused, unrefused
+
+
+# -- the nodes -----------------------------------------------------------------------------------
+
+def _read_pty(fd, into: bytearray):
+    try:
+        while True:
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                break
+            into.extend(chunk)
+    except (BlockingIOError, OSError):
+        pass
+
+
+def test_walk_bridge_node(launch, probe, serial_pair, tmp_path):
+    from soft_robot_interfaces.msg import LimbActivation, Primitive
+    controller, path = serial_pair
+    os.set_blocking(controller, False)
+    bridge = launch("bridge_node", params={"port": path, "settle_s": 0.1, "stall_timeout_s": 0.0})
+    bridge.wait_for_log("link ready", timeout=30)
+    wire = bytearray()
+    walk = Walk(probe, "/bridge_node", bridge)
+
+    def primitive():
+        return Primitive(id=1, name="B")
+
+    def limbs():
+        return LimbActivation(limbs=[1], pulse_duration=0.08)
+    walk.topic("/frog/primitive", Primitive, primitive)
+    walk.topic("/frog/limb_command", LimbActivation, limbs)
+    probe.spin_for(0.5)
+    _read_pty(controller, wire)
+    actuations = len(re.findall(rb"(?m)^h ", bytes(wire)))
+    walk.finish(actuations, tmp_path)
+    pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
+    probe.spin_for(0.3)
+    pub.publish(primitive())                                  # the detector works
+    probe.spin_until(lambda: _read_pty(controller, wire) or re.search(rb"(?m)^h ", bytes(wire)), 5, "an h line")
+
+
+def test_walk_sim_node(launch, probe, tmp_path):
+    from nav_msgs.msg import Odometry
+    from soft_robot_interfaces.msg import LimbActivation, Primitive
+    sim = launch("sim_node", params={"execute_primitives": True})
+    odom = []
+    probe.node.create_subscription(Odometry, "/frog/sim/odom", odom.append, QOS)
+    probe.wait_for_topic("/frog/sim/odom", timeout=90)
+    walk = Walk(probe, "/sim_node", sim)
+    walk.topic("/frog/primitive", Primitive, lambda: Primitive(id=1, name="B"))
+    walk.topic("/frog/limb_activation", LimbActivation, lambda: LimbActivation(limbs=[1], pulse_duration=0.08))
+    probe.spin_for(1.0)
+
+    def speed():
+        t = odom[-1].twist.twist
+        return math.hypot(t.linear.x, t.linear.y) + abs(t.angular.z)
+    moved = speed() > 1e-4 or not all(math.isfinite(v) for v in (odom[-1].pose.pose.position.x,))
+    walk.finish(int(moved), tmp_path)
+    pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
+    probe.spin_for(0.3)
+    pub.publish(Primitive(id=1, name="B"))
+    probe.spin_until(lambda: speed() > 1e-3, 10, "the kick moving the frog")
+
+
+def test_walk_kinematics_node(launch, probe, tmp_path):
+    from geometry_msgs.msg import Point, PointStamped
+    from sensor_msgs.msg import JointState
+    from soft_robot_interfaces.action import FollowCurve
+    from soft_robot_interfaces.srv import ForwardKinematics, SolveIk
+    kin = launch("kinematics_node", params={"config_samples": 0})
+    kin.wait_for_log("ready in", timeout=180)
+    setpoints = []
+    probe.node.create_subscription(JointState, "/finger/tendon_setpoints", setpoints.append, QOS)
+    target = (0.0, 0.0, 0.0)
+    walk = Walk(probe, "/kinematics_node", kin)
+    fk = probe.node.create_client(ForwardKinematics, "/finger/forward_kinematics")
+    probe.wait_for_service(fk, timeout=30)
+    rest = probe.call(fk, ForwardKinematics.Request(actuation=[0.0, 0.0, 0.0]), timeout=60)
+    target = (rest.tip.x, rest.tip.y, rest.tip.z - 0.002)
+
+    def point():
+        return PointStamped(point=Point(x=target[0], y=target[1], z=target[2]))
+    walk.topic("/finger/target", PointStamped, point)
+    walk.service("/finger/forward_kinematics", ForwardKinematics, lambda: ForwardKinematics.Request(
+        actuation=[0.001, 0.0, 0.0]))
+    walk.service("/finger/solve_ik", SolveIk, lambda: SolveIk.Request(
+        target=Point(x=target[0], y=target[1], z=target[2]), initial_guess=[0.0, 0.0, 0.0]))
+    walk.action("/finger/follow_curve", FollowCurve, lambda: FollowCurve.Goal(
+        waypoints=[Point(x=target[0], y=target[1], z=target[2])], tolerance=0.001))
+    probe.spin_for(0.5)
+    walk.finish(len(setpoints), tmp_path)
+    pub = probe.node.create_publisher(PointStamped, "/finger/target", QOS)
+    probe.spin_for(0.3)
+    pub.publish(point())
+    probe.spin_until(lambda: setpoints, 60, "a setpoint for a valid target")
+
+
+def test_walk_stepper_driver(launch, probe, tmp_path):
+    from sensor_msgs.msg import JointState
+    link = str(tmp_path / "marlin")
+    transcript = tmp_path / "transcript.txt"
+    launch("marlin_emulator", params={"port_link": link, "transcript": str(transcript)}).wait_for_log(
+        "emulated Marlin board", timeout=30)
+    drv = launch("stepper_driver", params={"port": link, "banner_timeout": 0.3, "reconnect_period": 0.2})
+    drv.wait_for_log("board ready", timeout=30)
+    walk = Walk(probe, "/stepper_driver", drv)
+
+    def setpoint():
+        return JointState(name=["cable_0", "cable_1", "cable_2"], position=[0.001, 0.0, 0.0])
+    walk.topic("/finger/tendon_setpoints", JointState, setpoint)
+    probe.spin_for(0.5)
+    walk.finish(transcript.read_text().count(" G1 "), tmp_path)
+    pub = probe.node.create_publisher(JointState, "/finger/tendon_setpoints", QOS)
+    probe.spin_for(0.3)
+    pub.publish(setpoint())
+    probe.spin_until(lambda: " G1 " in transcript.read_text(), 10, "a G1 for a valid setpoint")
+
+
+def test_walk_planner_node(launch, probe, library, tmp_path):
+    from nav_msgs.msg import Odometry
+    from soft_robot_interfaces.msg import Primitive
+    planner = launch("planner_node", params={"library_file": str(library), "period": 0.3, "stale_periods": 100.0})
+    chosen = []
+    probe.node.create_subscription(Primitive, "/frog/primitive", chosen.append, QOS)
+    probe.wait_for_topic("/frog/primitive", timeout=60)
+    walk = Walk(probe, "/planner_node", planner)
+
+    def odom():
+        m = Odometry()
+        m.header.frame_id = "tank"
+        m.pose.pose.orientation.w = 1.0
+        m.twist.twist.linear.x = 0.01
+        return m
+    walk.topic("/frog/odom", Odometry, odom, stamped=True, settle=0.05)
+    probe.spin_for(0.6)
+    walk.finish(sum(1 for p in chosen if p.id != Primitive.ID_I), tmp_path)
+    pub = probe.node.create_publisher(Odometry, "/frog/odom", QOS)
+    probe.spin_for(0.3)
+
+    def kicked():
+        m = odom()
+        m.header.stamp = probe.node.get_clock().now().to_msg()
+        pub.publish(m)
+        return any(p.id != Primitive.ID_I for p in chosen)
+    probe.spin_until(kicked, 10, "a kick chosen for valid odometry")
