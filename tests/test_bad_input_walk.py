@@ -1,4 +1,4 @@
-"""A generated walk of bad inputs through the actuating nodes (issue 23, "Deliver").
+"""A generated walk of bad inputs through every node (issue 23, "Deliver").
 
 For every subscription, service and action of bridge_node, sim_node, kinematics_node,
 stepper_driver and planner_node, the walk takes a valid input that *would* actuate and
@@ -11,6 +11,13 @@ that the node is alive and answers its parameter services, that nothing was actu
 spoiled input was refused (a service or goal answered with a refusal, or a refusal logged
 for the input); then the same valid input is sent once and must actuate (the detector works).
 Totals go to ``bad_input_walk.json`` in the test's folder and are printed.
+
+The other seven nodes (camera_sim, tracker_node, camera_node, recorder, robot_emulator,
+marlin_emulator, image_preview) are walked in one domain by ``test_walk_observing_nodes``;
+for them "nothing actuated" means no non-finite output (pose, odometry, ``Central: Q`` line,
+camera_info), no rendering from a non-finite pose and no preview of a refused frame; the
+recorder records every bad message and its MCAP stays readable. ``test_walk_totals`` prints
+one line for all the nodes walked in the run.
 """
 
 from __future__ import annotations
@@ -156,8 +163,8 @@ class Walk:
         self.probe.wait_for_subscriber(topic, timeout=30)
         self.probe.spin_for(0.3)
         for label, msg in variants(make, stamped):
-            if _same_as_valid(msg, make):
-                continue
+            if _same_as_valid(msg, make) and not label.startswith("header.stamp"):
+                continue                           # (the valid input is stamped "now" below: a zero stamp differs)
             before = len(self.proc.log_text())
             msg_stamp = getattr(msg, "header", None)
             if msg_stamp is not None and not label.startswith("header.stamp"):
@@ -210,7 +217,7 @@ class Walk:
         reply = self.probe.call(client, ListParameters.Request(), timeout=10)
         return self.proc.running() and len(reply.result.names) > 0
 
-    def finish(self, actuations: int, tmp_path):
+    def finish(self, actuations: int, tmp_path, extra_inputs: int = 0):
         """Non-finite values must be refused; an empty array, a huge count or a zero stamp may
         instead be accepted as harmless (e.g. no limbs = nothing to fire, an empty initial guess
         = the default), provided nothing was actuated."""
@@ -218,7 +225,7 @@ class Walk:
         accepted = [(i, label) for i, label, r in self.rows if not r]
         unrefused = [(i, label) for i, label in accepted if re.search(r"=(nan|inf|-inf)$", label)]
         fields = {(i, label.split("=")[0]) for i, label, _ in self.rows}
-        TOTALS[self.node_name] = dict(inputs=len({i for i, _, _ in self.rows}), fields=len(fields),
+        TOTALS[self.node_name] = dict(inputs=len({i for i, _, _ in self.rows}) + extra_inputs, fields=len(fields),
                                       values_tried=len(self.rows), refusals=len(self.rows) - len(accepted),
                                       accepted_harmless=len(accepted) - len(unrefused), actuations=actuations,
                                       accepted=accepted)
@@ -283,6 +290,8 @@ def test_walk_sim_node(launch, probe, tmp_path):
     walk.topic("/frog/primitive", Primitive, lambda: Primitive(id=1, name="B"))
     walk.topic("/frog/limb_activation", LimbActivation, lambda: LimbActivation(limbs=[1], pulse_duration=0.08))
     probe.spin_for(1.0)
+    # (the probe's own subscription makes the topic visible at once: wait for sim_node's odometry)
+    probe.spin_until(lambda: odom, 30, "odometry from sim_node")
 
     def speed():
         t = odom[-1].twist.twist
@@ -376,3 +385,190 @@ def test_walk_planner_node(launch, probe, library, tmp_path):
         pub.publish(m)
         return any(p.id != Primitive.ID_I for p in chosen)
     probe.spin_until(kicked, 10, "a kick chosen for valid odometry")
+
+
+# -- the nodes that observe, render, record or emulate -----------------------------------------------
+
+def _finite(msg) -> bool:
+    from soft_robot_common.message_checks import nonfinite_field
+    return nonfinite_field(msg, max_items=10**9) is None
+
+
+def _no_input_node(name, inputs: int, tmp_path, probe, proc):
+    """A node with no input that has a field to spoil (no subscription; Trigger services only)."""
+    walk = Walk(probe, name, proc)
+    walk.finish(0, tmp_path, extra_inputs=inputs)
+    return walk
+
+
+def test_walk_observing_nodes(launch, probe, tmp_path):
+    """camera_sim, tracker_node, camera_node (a video file), recorder, robot_emulator,
+    marlin_emulator and image_preview in one domain, their inputs remapped apart. Nothing
+    actuated means here: no non-finite pose or odometry from the tracker, no rendering from a
+    non-finite pose (numpy warnings) by camera_sim, no non-finite ``Central: Q`` line from
+    robot_emulator, no preview of a refused frame, no non-finite camera_info from camera_node; the
+    recorder records every bad message (recording is its answer) and its MCAP stays readable."""
+    import cv2
+    from geometry_msgs.msg import Point, PoseStamped
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+    from soft_robot_interfaces.msg import LimbActivation
+    from visualization_msgs.msg import Marker
+
+    clip = tmp_path / "clip.avi"
+    w = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 10, (160, 120))
+    for _ in range(10):
+        w.write(np.full((120, 160, 3), 40, np.uint8))
+    w.release()
+    emu_link, marlin_link, rec_dir = tmp_path / "robot_tty", tmp_path / "marlin", tmp_path / "rec"
+    tracker = launch("tracker_node", params={"publish_tf": False})
+    cam_sim = launch("camera_sim", params={"fps": 2.0, "noise_sigma": 0.0, "blur_samples": 1},
+                     remap={"camera/image_raw": "/sim/camera/image_raw",
+                            "camera/camera_info": "/sim/camera/camera_info"})
+    cam = launch("camera_node", params={"source": str(clip), "loop": True},
+                 remap={"camera/image_raw": "/vid/camera/image_raw",
+                        "camera/camera_info": "/vid/camera/camera_info"})
+    rec = launch("recorder", params={"output_dir": str(rec_dir), "file_prefix": "walk",
+                                     "topics": ["/walk/odom", "/walk/limbs"]})
+    emu = launch("robot_emulator", params={"link_path": str(emu_link), "imu_rate_hz": 20.0},
+                 remap={"frog/sim/odom": "/emu/odom"})
+    marlin = launch("marlin_emulator", params={"port_link": str(marlin_link)})
+    preview = launch("image_preview", params={"rate_hz": 120.0},
+                     remap={"camera/image_raw": "/preview/image_raw"})
+
+    # -- tracker_node: camera_info, images, kicks; must publish no non-finite pose or odometry
+    poses, odoms = [], []
+    probe.node.create_subscription(PoseStamped, "/frog/pose", poses.append, QOS)
+    probe.node.create_subscription(Odometry, "/frog/odom", odoms.append, QOS)
+    k = [300.0, 0.0, 80.0, 0.0, 300.0, 60.0, 0.0, 0.0, 1.0]
+
+    def info():
+        return CameraInfo(width=160, height=120, distortion_model="plumb_bob", d=[0.0] * 5, k=k,
+                          r=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                          p=[300.0, 0.0, 80.0, 0.0, 0.0, 300.0, 60.0, 0.0, 0.0, 0.0, 1.0, 0.0])
+
+    def image():
+        return Image(width=160, height=120, encoding="bgr8", step=480, data=bytes(160 * 120 * 3))
+
+    def kick():
+        return LimbActivation(limbs=[1], pulse_duration=0.08)
+    info_pub = probe.node.create_publisher(CameraInfo, "/camera/camera_info", QOS)
+    probe.wait_for_subscriber("/camera/camera_info", timeout=60)
+
+    def publish_info():
+        m = info()
+        m.header.stamp = probe.node.get_clock().now().to_msg()
+        info_pub.publish(m)
+    publish_info()
+    tracker.wait_for_log("camera model from camera_info", timeout=30)
+    walk = Walk(probe, "/tracker_node", tracker)
+    walk.topic("/camera/camera_info", CameraInfo, info)
+    publish_info()                                    # the valid model back before the images
+    probe.spin_for(0.3)
+    walk.topic("/camera/image_raw", Image, image, stamped=True)
+    walk.topic("/frog/bridge/sent", LimbActivation, kick, stamped=True)
+    probe.spin_for(0.5)
+    walk.finish(sum(not _finite(m) for m in poses + odoms), tmp_path)
+
+    # -- camera_sim: odometry and shape; must not render from a non-finite pose
+    walk = Walk(probe, "/camera_sim", cam_sim)
+
+    def odom():
+        m = Odometry()
+        m.header.frame_id, m.child_frame_id = "tank", "frog"
+        m.pose.pose.position.x, m.pose.pose.position.y = 0.1, 0.05
+        m.pose.pose.orientation.w = 1.0
+        m.twist.twist.linear.x = 0.01
+        return m
+
+    def shape():
+        m = Marker(type=Marker.LINE_LIST, action=Marker.ADD)
+        m.header.frame_id = "tank"
+        m.pose.orientation.w = 1.0
+        m.scale.x = 0.002
+        m.color.a = 1.0
+        corners = [(0.05, 0.03), (-0.05, 0.03), (-0.05, -0.03), (0.05, -0.03)]
+        for a, b in zip(corners, corners[1:] + corners[:1]):
+            m.points += [Point(x=0.1 + a[0], y=0.05 + a[1]), Point(x=0.1 + b[0], y=0.05 + b[1])]
+        return m
+    walk.topic("/frog/sim/odom", Odometry, odom, stamped=True)
+    walk.topic("/frog/sim/shape", Marker, shape, stamped=True)
+    probe.spin_for(1.0)
+    walk.finish(len(re.findall(r"RuntimeWarning|invalid value", cam_sim.log_text())), tmp_path)
+
+    # -- robot_emulator: odometry for its IMU; must write no non-finite Central: Q line
+    fd = os.open(str(emu_link), os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    wire = bytearray()
+    try:
+        walk = Walk(probe, "/robot_emulator", emu)
+        walk.topic("/emu/odom", Odometry, odom, stamped=True)
+        probe.spin_for(0.5)
+        _read_pty(fd, wire)
+        q_lines = re.findall(rb"Central: Q[^\r\n]*", bytes(wire))
+        walk.finish(sum(1 for q in q_lines if re.search(rb"nan|inf", q, re.I)), tmp_path,
+                    extra_inputs=5)                        # its 5 Trigger services: no field to spoil
+        pub = probe.node.create_publisher(Odometry, "/emu/odom", QOS)
+        probe.spin_for(0.3)
+        pub.publish(odom())                                # the detector works: a Q line for valid odometry
+        probe.spin_until(lambda: _read_pty(fd, wire) or len(re.findall(rb"Central: Q", bytes(wire))) > len(q_lines),
+                         5, "a Q line for valid odometry")
+    finally:
+        os.close(fd)
+
+    # -- image_preview: frames; must not preview a refused frame
+    previews = []
+    probe.node.create_subscription(CompressedImage, "/camera/preview/compressed", previews.append, QOS)
+    walk = Walk(probe, "/image_preview", preview)
+    walk.topic("/preview/image_raw", Image, image, stamped=True)
+    probe.spin_for(0.5)
+    harmless = sum(1 for _, label, refused in walk.rows if not refused)
+    walk.finish(max(0, len(previews) - harmless), tmp_path)
+
+    # -- camera_node and marlin_emulator: no input with a field to spoil; alive, outputs finite
+    infos = []
+    probe.node.create_subscription(CameraInfo, "/vid/camera/camera_info", infos.append, QOS)
+    probe.spin_until(lambda: infos, 30, "camera_node's camera_info")
+    _no_input_node("/camera_node", 0, tmp_path, probe, cam)
+    TOTALS["/camera_node"]["actuations"] = sum(not _finite(m) for m in infos)
+    assert TOTALS["/camera_node"]["actuations"] == 0
+    _no_input_node("/marlin_emulator", 5, tmp_path, probe, marlin)   # 5 Trigger services; G-code is on its pty
+
+    # -- recorder: records every bad message; the MCAP stays readable
+    published = {"/walk/odom": 0, "/walk/limbs": 0}
+    rows = []
+    for topic, typ, make in (("/walk/odom", Odometry, odom), ("/walk/limbs", LimbActivation, kick)):
+        pub = probe.node.create_publisher(typ, topic, QOS)
+        probe.wait_for_subscriber(topic, timeout=30)
+        probe.spin_for(0.3)
+        for label, m in variants(make, stamped=True):
+            pub.publish(m)
+            published[topic] += 1
+            rows.append((topic, label))
+            probe.spin_for(0.02)
+    probe.spin_for(1.5)
+    walk = Walk(probe, "/recorder", rec)
+    assert walk.alive()
+    assert rec.stop() == 0 and rec.stopped_cleanly, rec.log_text()[-2000:]
+    files = sorted(rec_dir.glob("walk_*.mcap"))
+    recorded = {t: 0 for t in published}
+    with open(files[0], "rb") as f:
+        for _, channel, _, _ in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            recorded[channel.topic] += 1
+    TOTALS["/recorder"] = dict(inputs=2, fields=len({(t, lab.split("=")[0]) for t, lab in rows}),
+                               values_tried=len(rows), refusals=0, accepted_harmless=len(rows),
+                               actuations=0, recorded=recorded)
+    print("\nbad-input walk /recorder: " + json.dumps(TOTALS["/recorder"]))
+    assert "Traceback" not in rec.log_text()
+    assert recorded == published, (recorded, published)
+
+
+def test_walk_totals():
+    """One line for all the nodes walked in this run (the per-node lines are printed above)."""
+    if not TOTALS:
+        pytest.skip("no node walked in this run")
+    keys = ("inputs", "fields", "values_tried", "refusals", "accepted_harmless", "actuations")
+    total = {"nodes": len(TOTALS), **{k: sum(t[k] for t in TOTALS.values()) for k in keys}}
+    print(f"\nbad-input walk totals ({', '.join(sorted(TOTALS))}): " + json.dumps(total))
+    assert total["actuations"] == 0

@@ -28,8 +28,8 @@ from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from soft_robot_common import (ConfigurationError, NodeDiagnostics, Param, PathClaim, declare_parameters,
-                               message_problem, namespaced_path, run_node)
+from soft_robot_common import (ConfigurationError, MessageGate, NodeDiagnostics, Param, PathClaim,
+                               declare_parameters, namespaced_path, run_node)
 from std_srvs.srv import Trigger
 
 from frog_bridge.core.emulator import (
@@ -108,6 +108,7 @@ class RobotEmulator(Node):
 
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.fired_pub = self.create_publisher(LimbActivation, "frog/limb_activation", qos)
+        self.gate = MessageGate(self)    # non-finite or oversized odometry is refused
         self.create_subscription(Odometry, "frog/sim/odom", self.on_odom, qos)
         for name, cb in (("inject_emergency", self.on_emergency), ("unplug", self.on_unplug),
                          ("replug", self.on_replug), ("inject_garbage", self.on_garbage), ("stall", self.on_stall)):
@@ -245,11 +246,11 @@ class RobotEmulator(Node):
         self.get_logger().debug(f"fired {limb_names(fire.limbs)} for {fire.pulse_s * 1e3:g} ms")
 
     def on_odom(self, msg: Odometry) -> None:
-        problem = message_problem(msg, stamped=False)    # only the heading is used: any stamp will do
+        problem = self.gate.problem(msg, stamped=False)    # only the heading is used: any stamp will do
         if problem:
             self.counts["odom_refused"] = self.counts.get("odom_refused", 0) + 1
-            self.get_logger().warn(f"frog/sim/odom refused: {problem}; the IMU keeps the last good heading",
-                                   throttle_duration_sec=2.0)
+            if self.gate.should_log("frog/sim/odom", problem):    # once a second per problem
+                self.get_logger().warn(f"frog/sim/odom refused: {problem}; the IMU keeps the last good heading")
             return
         o = msg.pose.pose.orientation
         yaw = quaternion_yaw(o.w, o.x, o.y, o.z)

@@ -24,7 +24,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import CompressedImage, Image
-from soft_robot_common import NodeDiagnostics, Param, declare_parameters, run_node
+from soft_robot_common import MessageGate, NodeDiagnostics, Param, declare_parameters, run_node
 from soft_robot_common.diagnostics import OK, WARN
 
 _PARAMS = [
@@ -49,6 +49,7 @@ class ImagePreviewNode(Node):
         self.counts = {"received": 0, "passed": 0, "refused": 0}
         self._diag_received = 0
         self.last_refusal = ""
+        self.gate = MessageGate(self)
         self.diagnostics = NodeDiagnostics(self, "preview", self._diagnostics)
         self.get_logger().info(f"JPEG copy of {self.resolve_topic_name('camera/image_raw')} at <= "
                                f"{self.cfg['rate_hz']:g} Hz on {self.resolve_topic_name('camera/preview/compressed')}")
@@ -65,10 +66,15 @@ class ImagePreviewNode(Node):
     def _refuse(self, text: str) -> None:
         self.counts["refused"] += 1
         self.last_refusal = text
-        self.get_logger().error(text, throttle_duration_sec=5.0)
+        if self.gate.should_log("camera/image_raw", text):    # once a second per problem, a new one at once
+            self.get_logger().error(f"refused camera/image_raw: {text}")
 
     def on_image(self, msg: Image) -> None:
         self.counts["received"] += 1
+        problem = self.gate.problem(msg, stamped=False)     # the common rule: finite, sane sizes
+        if problem:
+            self._refuse(problem)
+            return
         stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         period_ns = 1e9 / self.cfg["rate_hz"]
         if self.next_ns is not None and 0 < self.next_ns - stamp_ns <= period_ns:

@@ -22,7 +22,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
-from soft_robot_common import ConfigurationError, Param, declare_parameters, message_problem, run_node
+from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
 from visualization_msgs.msg import Marker
 
 from frog_vision.core.camera_model import CameraModel
@@ -87,6 +87,7 @@ class CameraSimNode(Node):
         self._diag_refused = 0
         self.refused = 0                 # messages refused by the common rule (non-finite, unstamped)
         self.last_refusal = ""
+        self.gate = MessageGate(self)    # logs once a second per input and problem (a new field at once)
         self.next_capture = None
         self.waiting_logged = False
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
@@ -102,12 +103,13 @@ class CameraSimNode(Node):
 
     def _refuse(self, what: str, msg) -> bool:
         """Log and count ``msg`` if the common rule refuses it (True: refused)."""
-        problem = message_problem(msg, self.get_clock().now().nanoseconds)
+        problem = self.gate.problem(msg)
         if problem is None:
             return False
         self.refused += 1
         self.last_refusal = f"{what} refused: {problem}"
-        self.get_logger().warn(self.last_refusal, throttle_duration_sec=2.0)
+        if self.gate.should_log(what, problem):
+            self.get_logger().warn(self.last_refusal)
         return True
 
     def on_odom(self, msg: Odometry) -> None:

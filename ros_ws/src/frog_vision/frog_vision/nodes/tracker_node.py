@@ -29,7 +29,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
 from soft_robot_interfaces.msg import LimbActivation
 
 from frog_vision.core.detection import DetectorSettings
@@ -110,6 +110,7 @@ class TrackerNode(Node):
         except ValueError as exc:
             raise ConfigurationError(str(exc)) from exc
         self.tracker: Tracker | None = None
+        self.gate = MessageGate(self)     # non-finite, unstamped or oversized inputs are refused
         self.last_kick: float | None = None       # stamp of the last limb firing [s]
         if self.fixed_camera is not None:
             self._make_tracker(self.fixed_camera)
@@ -178,6 +179,8 @@ class TrackerNode(Node):
             self.tracker.kick(self.last_kick)
 
     def on_kick(self, msg: LimbActivation) -> None:
+        if self.gate.refused(self.cfg["kick_topic"], msg):
+            return
         if not msg.limbs:                         # nothing was heated
             return
         stamp = stamp_to_s(msg.header.stamp)
@@ -198,6 +201,8 @@ class TrackerNode(Node):
         self.bad_frames += 1
 
     def on_info(self, msg: CameraInfo) -> None:
+        if self.gate.refused("camera/camera_info", msg, stamped=False):    # its stamp is not used
+            return
         if self.fixed_camera is not None:
             return
         try:
@@ -214,6 +219,8 @@ class TrackerNode(Node):
             self.get_logger().info("camera model changed")
 
     def on_image(self, msg: Image) -> None:
+        if self.gate.refused("camera/image_raw", msg):
+            return
         stamp = stamp_to_s(msg.header.stamp)
         if self.tracker is None:
             self._error("no camera_info received yet: cannot use images")
@@ -222,7 +229,7 @@ class TrackerNode(Node):
             img = image_to_array(msg)
             self.tracker.camera.check_image(img)
         except ValueError as exc:
-            self._error(f"bad frame: {exc}")
+            self._error(f"refused bad frame: {exc}")
             return
         if self.last_stamp is not None:
             gap = stamp - self.last_stamp
