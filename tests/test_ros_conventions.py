@@ -68,7 +68,8 @@ def test_two_frogs_in_two_namespaces_do_not_cross_talk(launch, probe, library):
         # its own frog's offset (cross-talk would give the other's: 0.2 m apart); a few cm of
         # margin, since the first status received may come after a kick or two
         assert first.distance_to_path == pytest.approx(y, abs=0.05), (ns, first.distance_to_path)
-        assert abs(odom[ns][-1].pose.pose.position.y - y) < 0.05
+        # half the frogs' separation: the frog swims a few cm toward its path meanwhile
+        assert abs(odom[ns][-1].pose.pose.position.y - y) < 0.1
     assert probe.node.count_publishers("/frog/sim/odom") == 0
     assert probe.node.count_publishers("/frog/primitive") == 0
     for n in nodes:

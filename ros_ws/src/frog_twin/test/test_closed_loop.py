@@ -71,7 +71,7 @@ ARC_ANGLE = 1.0        # rad: 30 cm of path; the chord misses the arc's end by 1
 def test_follows_a_right_hand_arc(library):
     """A right-hand arc of radius 30 cm, 30 cm long (about three times the frog's tightest
     steady turn). Tolerance: mean distance to the circle <= 3.5 cm, max <= 9 cm, and the robot
-    gets past 95 % of the arc (measured with this library: 2.6 cm mean, 7.5 cm max).
+    gets past 90 % of the arc (the goal radius; measured with the issue-11 library: 2.6 cm mean, 7.5 cm max).
     Heading weighs w_b = 150 here: with the default w_b = 50 the progress term keeps the
     frog too straight on curves (5.5 cm mean, 16 cm max on this arc), while w_b >= 100 stalls
     depth 1 at the steep start of the paper's sinusoid, so the default stays at 50."""
@@ -87,7 +87,9 @@ def test_follows_a_right_hand_arc(library):
     rel = res.pose[:, :2] - centre
     d = np.abs(np.hypot(rel[:, 0], rel[:, 1]) - RADIUS)          # distance to the circle
     swept = np.arctan2(rel[:, 0], rel[:, 1])                      # 0 at the start, clockwise > 0
-    assert swept.max() >= 0.95 * ARC_ANGLE, f"got only {swept.max() / ARC_ANGLE:.0%} along the arc"
+    # the run ends at the planner's goal radius: 93 % of the arc with the issue-18 frog, which
+    # turns less per kick and reaches the radius from the inside (95 % with the issue-11 one)
+    assert swept.max() >= 0.90 * ARC_ANGLE, f"got only {swept.max() / ARC_ANGLE:.0%} along the arc"
     assert d.mean() <= 0.035 and d.max() <= 0.09, (d.mean(), d.max())
     used = res.metrics["primitives_used"]
     right, left = sum(used.get(p, 0) for p in "CEG"), sum(used.get(p, 0) for p in "DFH")
