@@ -95,6 +95,19 @@ def primitive_targets(transitions, primitives=('B', 'C', 'D', 'E', 'F')) -> dict
     return out
 
 
+def read_evaluations(path: Path) -> list[dict]:
+    """Rows of an ``evaluations.jsonl`` cache (none if absent); a line cut by an interrupted
+    run is skipped."""
+    rows = []
+    if path.is_file():
+        for line in path.read_text().splitlines():
+            try:
+                rows.append(json.loads(line))
+            except ValueError:
+                continue
+    return rows
+
+
 @dataclass
 class Evaluation:
     """One objective evaluation."""
@@ -143,12 +156,8 @@ class JointObjective:
                             'data': self.library.source.get('data_sha256')}, sort_keys=True, default=str)
         self.ident = hashlib.sha256(ident.encode()).hexdigest()[:16]
         self.cache_file = Path(cache_file) if cache_file else None
-        if self.cache_file and self.cache_file.is_file():
-            for line in self.cache_file.read_text().splitlines():
-                try:
-                    row = json.loads(line)
-                except ValueError:
-                    continue   # a line cut by an interrupted run
+        if self.cache_file:
+            for row in read_evaluations(self.cache_file):
                 if row.get('key'):
                     self.cache[row['key']] = Evaluation(row['values'], row['cost'], row['terms'], row.get('sim', {}))
 

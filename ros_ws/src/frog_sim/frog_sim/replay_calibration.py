@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from . import multi_period as mp
+from .calibration import read_evaluations
 from .core.actuation import ActuationLibrary
 from .core.model_parameters import FrogParameters, parameter_range
 from .core.simulation import DEFAULT_TIME_STEP, FrogSimulation
@@ -89,12 +90,8 @@ class ReplayObjective:
         self.points = sorted({(e, f) for e, f, _ in self.calibration_speeds + self.experiment_speeds})
         self.cache: dict[str, ReplayEvaluation] = {}
         self.cache_file = Path(cache_file) if cache_file else None
-        if self.cache_file and self.cache_file.is_file():
-            for line in self.cache_file.read_text().splitlines():
-                try:
-                    row = json.loads(line)
-                except ValueError:
-                    continue     # a line cut by an interrupted run
+        if self.cache_file:
+            for row in read_evaluations(self.cache_file):
                 ev = ReplayEvaluation(**row)
                 self.cache[self._key(ev.values)] = ev
 
