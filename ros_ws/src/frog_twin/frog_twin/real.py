@@ -277,6 +277,7 @@ def preflight(args, watch: RealWatch, procs, path, timeout: float = PREFLIGHT_TI
 
 def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
     """One run on the real robot: pre-flight, follow, stop, report. Raises PreflightError."""
+    from frog_twin.twin import stop_processes
     from soft_robot_common.processes import acquire_domain
     out.mkdir(parents=True, exist_ok=True)
     graph = real_graph(args, name, out, path_settings, settings)
@@ -340,11 +341,7 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
         if reason is None:
             watch.stop_all()
         signal.signal(signal.SIGINT, previous)
-        for p in reversed(procs):
-            if p.running():
-                code = p.stop()
-                if code not in (0, None):
-                    print(f"  warning: {p.name} exited with {code}; log {p.log_path}")
+        stop_processes(procs)
         watch.close()
         domain.release()
     return real_report(args, name, out, settings, path_settings, reason, t_stop - t_start, checks)

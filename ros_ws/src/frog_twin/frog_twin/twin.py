@@ -113,6 +113,15 @@ def ensure_library(path: Path, states: int, horizon: float = 3.0) -> Path:
     return path
 
 
+def stop_processes(procs) -> None:
+    """Stop the run's node processes in reverse start order; warn for any that did not exit 0."""
+    for p in reversed(procs):
+        if p.running():
+            code = p.stop()
+            if code not in (0, None):
+                print(f"  warning: {p.name} exited with {code}; log {p.log_path}")
+
+
 def _library_model_differs(path: Path) -> str:
     """'' if the library's robot model is today's default, else the first differing parameter."""
     from frog_sim.core.model_parameters import FrogParameters
@@ -290,11 +299,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
         watch.spin(1.0)
         wall = time.monotonic() - t_start
     finally:
-        for p in reversed(procs):
-            if p.running():
-                code = p.stop()
-                if code not in (0, None):
-                    print(f"  warning: {p.name} exited with {code}; log {p.log_path}")
+        stop_processes(procs)
         watch.close()
         domain.release()
     files = sorted((out / "recording").glob("*.mcap"))
