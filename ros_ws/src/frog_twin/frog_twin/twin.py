@@ -22,6 +22,15 @@ frog-twin --path line --no-vision            # ground-truth odometry instead of 
 frog-twin --path ellipse --direct            # planner -> simulator without the serial link
 frog-twin --path line --depth 2 --w-heading 150 --duration 60
 
+Faults (issue 22): inject them at simulated times after the planner's start; a crashed node is
+restarted with back-off; the run ends completed, stopped cleanly (with the reason) or failed, and
+says how many limb firings were made on stale state and what the recorder lost (both must be 0):
+
+frog-twin --path line --faults "camera_freeze@4+5;kill:tracker_node@12"
+frog-twin --path sine --faults "unplug@5+2;sigstop:planner_node@9+4;emergency@14"
+frog-twin --fault-campaign                          # every fault x 3 moments x 3 seeds x line, sine
+frog-twin --fault-campaign --fault-classes --campaign-paths line   # reduced: one run per fault class
+
 Hardware replay: re-run one of the real robot's closed-loop experiments (the authors' logs,
 shared/data/frog/hardware_runs/) from its logged start pose (tag offset applied), at its
 fitted decision period, along its reference path as waypoints; the real and the twin's
@@ -48,9 +57,12 @@ from pathlib import Path
 from frog_planner.core.settings import PathSettings, PlannerSettings, add_arguments, as_dict, from_arguments
 from soft_robot_common.graph import GraphError, load_graph
 from soft_robot_common.processes import NodeProcess, acquire_domain
+from soft_robot_common.supervision import RestartPolicy, Supervisor
 
 from frog_twin.core import twin_report
-from frog_twin.core.twin_recording import read_twin_recording
+from frog_twin.core.faults import FaultSpecError, check_against_graph, fault_report, parse_faults
+from frog_twin.core.twin_recording import read_twin_recording, readable_files, recorded_stamps
+from frog_twin.fault_injection import CHECKED_TOPICS, FaultInjector, RunObserver
 
 PATH_NAMES = ("line", "sine", "ellipse")
 
@@ -160,6 +172,14 @@ class PlannerWatch:
     def _on_status(self, msg) -> None:
         self.last = msg
 
+    def publish_stop(self) -> None:
+        """The run's one stop (frog/stop): the planner stops deciding, the bridge cancels every pulse."""
+        from std_msgs.msg import Empty
+        if not hasattr(self, "stop_pub"):
+            self.stop_pub = self.node.create_publisher(Empty, "/frog/stop", 10)
+            self.spin(0.3)
+        self.stop_pub.publish(Empty())
+
     def _on_odom(self, msg) -> None:
         self.odom_count += 1
 
@@ -205,6 +225,9 @@ class PlannerWatch:
 #: The frog's node graph (package data; also installed as share/frog_twin/config/frog_graph.yaml).
 GRAPH_FILE = Path(__file__).resolve().parent / "config" / "frog_graph.yaml"
 VISION_NODES = ("camera_sim", "tracker_node", "image_preview")
+#: not restarted after a crash: the simulated world (a new one would start from the initial pose)
+#: and the robot; the run stops instead
+ESSENTIAL_NODES = ("sim_node", "robot_emulator")
 SERIAL_NODES = ("robot_emulator", "bridge_node")
 
 
@@ -235,6 +258,31 @@ def twin_graph(args, name: str, out: Path, path_settings, settings, start_pose, 
     return load_graph(graph_file, "sim", overrides, exclude=exclude)
 
 
+def _restarter(node, domain, out: Path, watch):
+    """start(label) for the supervisor: the node's command line again; a planner resumes where it was."""
+    def start(label: str) -> NodeProcess:
+        if node.name == "planner_node" and watch.last is not None:
+            # a restarted planner must not start the path over, nor wait for ~/start again
+            node.parameters.update(autostart=True, initial_progress=float(min(1.0, max(0.0,
+                                                                                   watch.last.path_progress))))
+        return node.start(domain.env, out, label)
+    return start
+
+
+def twin_report_faults(rep: dict) -> str:
+    """A few lines on a run under faults: outcome, what the injector did, recovery, the two zero counts."""
+    lines = [f"  outcome: {rep['outcome']}" + (f" ({rep['stop_reason']})" if rep["stop_reason"] else "")]
+    lines += [f"    t = {t:6.1f} s  {what}" for t, what in rep["actions"]]
+    for pf in rep["per_fault"]:
+        rec = "not recovered" if pf["recovery_s"] is None else f"recovered in {pf['recovery_s']:.1f} s"
+        lines.append(f"  {pf['fault']}: {rec}")
+    lines.append(f"  limb firings on state older than the bound: {len(rep['stale_firings'])} of {rep['n_firings']}; "
+                 f"messages lost by the recorder while up: {rep['recorder_lost']}")
+    if rep["injector_failures"]:
+        lines.append("  injector actions refused: " + "; ".join(rep["injector_failures"]))
+    return "\n".join(lines)
+
+
 def _path_start_pose(args, path_settings):
     path = path_settings.build()
     h0 = float(path.tangent_headings[0])
@@ -242,72 +290,119 @@ def _path_start_pose(args, path_settings):
     return float(x0[0]), float(x0[1]), h0
 
 
-def run_path(args, name: str, out: Path, path_settings=None, start_pose=None, settings=None, duration=None) -> dict:
+def run_path(args, name: str, out: Path, path_settings=None, start_pose=None, settings=None, duration=None,
+             faults=()) -> dict:
     """One closed-loop run of the twin on path ``name``; returns its metrics (see :func:`run_twin`)."""
-    return run_twin(args, name, out, path_settings, start_pose, settings, duration)[1]
+    return run_twin(args, name, out, path_settings, start_pose, settings, duration, faults)[1]
 
 
-def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, settings=None, duration=None):
+def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, settings=None, duration=None,
+             faults=()):
     """One closed-loop run of the twin; returns (its recording, its metrics).
 
     By default the path is the paper's path ``name`` placed in the camera's view, the start
     is on it (``--lateral-offset``) and the planner's settings are ``args.settings``;
     ``path_settings`` (a :class:`PathSettings`), ``start_pose`` (x, y, heading) and
     ``settings`` (a :class:`PlannerSettings`) replace them (the hardware replay), and
-    ``duration`` [s simulated] replaces ``args.duration``.
+    ``duration`` [s simulated] replaces ``args.duration``. ``faults``
+    (:class:`frog_twin.core.faults.Fault`) are injected during the run; a crashed node is
+    restarted with back-off (the world, sim_node, and the robot are not: the run stops).
     """
     out.mkdir(parents=True, exist_ok=True)
     path_settings = path_settings or placed_path_settings(args.path_settings, name)
     settings = settings or args.settings
     x0, y0, h0 = start_pose or _path_start_pose(args, path_settings)
-    domain = acquire_domain()
-    procs: list[NodeProcess] = []
-    watch = PlannerWatch(domain)
     graph = twin_graph(args, name, out, path_settings, settings, (x0, y0, h0))
+    if faults:
+        check_against_graph(faults, graph.names())
+        if any(f.kind == "unplug" for f in faults):     # the injector plugs back in (~/replug)
+            graph["robot_emulator"].parameters["unplug_duration_s"] = 0.0
+    domain = acquire_domain()
+    watch = PlannerWatch(domain)
+    observer = RunObserver(watch.node)
+    supervisor = Supervisor(RestartPolicy(), essential=ESSENTIAL_NODES, log=lambda s: print("  " + s, flush=True),
+                            on_restart=lambda name, proc: observer.node_restarted())
+    injector = None
+    stop_reason = None
+    goal = False
     try:
         for node in graph:
-            procs.append(node.start(domain.env, out))
+            supervisor.add(node.name, node.start(domain.env, out), _restarter(node, domain, out, watch))
             if node.name == "robot_emulator":
                 link = Path(node.parameters["link_path"])
-                watch.wait(lambda: link.exists(), 60, "the robot emulator's serial device", procs)
-        watch.wait(lambda: watch.odom_count >= 5, 120, "odometry on /frog/odom (camera + tracker running)", procs)
+                watch.wait(lambda: link.exists(), 60, "the robot emulator's serial device", supervisor.processes())
+        watch.wait(lambda: watch.odom_count >= 5, 120, "odometry on /frog/odom (camera + tracker running)",
+                   supervisor.processes())
         # the metrics start at the planner's first decision: the recorder must hear it
-        recorded = ("/frog/sim/odom", "/frog/primitive", "/frog/planner/status")
+        recorded = ("/frog/sim/odom", *CHECKED_TOPICS)
         watch.wait(lambda: watch.subscribed("recorder", recorded), 60,
-                   f"the recorder subscribed to {', '.join(recorded)}", procs)
+                   f"the recorder subscribed to {', '.join(recorded)}", supervisor.processes())
+        watch.wait(lambda: observer.sim_now is not None, 30, "/clock", supervisor.processes())
         watch.start_planner()
+        sim_start = observer.sim_now
+        injector = FaultInjector(watch.node, faults, supervisor, log=lambda s: print("  " + s, flush=True))
         limit = duration or args.duration
         t_start = time.monotonic()
-        print(f"  {name}: following (at most {limit:.0f} s simulated, real-time factor {args.real_time_factor:g})",
-              flush=True)
-        # simulated time from the planner's status stamps
+        print(f"  {name}: following (at most {limit:.0f} s simulated, real-time factor {args.real_time_factor:g})"
+              + (f"; faults: {'; '.join(f.label() for f in faults)}" if faults else ""), flush=True)
+        last_following = sim_start
         while True:
-            watch.spin(0.5)
-            for p in procs:
-                if not p.running():
-                    raise RuntimeError(f"{p.name} exited early:\n{p.log_text()[-3000:]}")
-            if watch.state == watch.Status.STATE_GOAL_REACHED:
+            watch.spin(0.2)
+            sim_t = observer.sim_now - sim_start
+            injector.tick(sim_t, observer.sim_now)
+            stop_reason = supervisor.poll()
+            if stop_reason:
                 break
-            if watch.last is not None:
-                sim_now = watch.last.header.stamp.sec + watch.last.header.stamp.nanosec * 1e-9
-                if not hasattr(watch, "sim_start"):
-                    watch.sim_start = sim_now
-                if sim_now - watch.sim_start > limit:
-                    break
+            observer.watch_recorder("recorder" in supervisor.names() and not supervisor.down("recorder")
+                                    and watch.subscribed("recorder", CHECKED_TOPICS))
+            if watch.state == watch.Status.STATE_GOAL_REACHED:
+                goal = True
+                break
+            if watch.state == watch.Status.STATE_FOLLOWING:
+                last_following = observer.sim_now
+            if observer.emergency:
+                stop_reason = f"the robot reported an emergency (bridge: {observer.emergency})"
+                break
+            if observer.sim_now - last_following > args.stuck_timeout:
+                stop_reason = (f"the planner has not followed for {args.stuck_timeout:g} s simulated: "
+                               f"{watch.last.message if watch.last is not None else 'no status'}")
+                break
+            if sim_t > limit:
+                stop_reason = f"time limit ({limit:g} s simulated)"
+                break
             if time.monotonic() - t_start > 10 * limit / args.real_time_factor + 60:
                 raise RuntimeError(f"{name}: the twin made too little progress in wall time (machine overloaded?)")
+        if stop_reason and not stop_reason.startswith("time limit"):
+            print(f"  {name}: stopping: {stop_reason}", flush=True)
+            watch.publish_stop()
         watch.spin(1.0)
+        observer.close_recorder_interval("recorder" in supervisor.names() and not supervisor.down("recorder"))
         wall = time.monotonic() - t_start
     finally:
-        stop_processes(procs)
+        if injector is not None:
+            injector.finish()
+        supervisor.stop_all()
         watch.close()
         domain.release()
     files = sorted((out / "recording").glob("*.mcap"))
     if not files:
         raise RuntimeError(f"no recording in {out / 'recording'}; see {out}/recorder.log")
+    files = readable_files(files, out / "recovered")    # a killed recorder's file, recovered
     rec = read_twin_recording(files)
     metrics = twin_report.run_metrics(rec, name)
     metrics["wall_time_s"] = wall
+    metrics["goal_reached"] = goal
+    metrics["stop_reason"] = None if goal else stop_reason
+    metrics["supervision"] = supervisor.summary()
+    metrics["unclean_stops"] = supervisor.unclean_stops()
+    if faults:
+        bridge = graph["bridge_node"].parameters if "bridge_node" in graph else {}
+        metrics["faults"] = fault_report(
+            faults, observer, sim_start, injector, recorded_stamps(files, CHECKED_TOPICS),
+            # planner_node's stale bound (stale_periods 2 x the period) + the camera-to-planner latency
+            pose_bound=2.0 * settings.period + 0.2,
+            command_bound=float(bridge.get("max_command_age_s", 0.5)) + 0.2, goal=goal,
+            stop_reason=stop_reason, unclean=metrics["unclean_stops"])
     metrics["recording"] = [str(f) for f in files]
     metrics["settings"] = {"planner": as_dict(settings), "path": as_dict(path_settings),
                            "start_pose": [x0, y0, h0], "real_time_factor": args.real_time_factor,
@@ -497,6 +592,24 @@ def main(argv=None) -> int:
     gg.add_argument("--mode", choices=("sim", "real"), default=None,
                     help="with --print-graph: the twin's graph (sim, default) or the real robot's (real; implied by "
                          "--robot-port / --camera)")
+    fg = ap.add_argument_group("faults (issue 22)")
+    fg.add_argument("--faults", metavar="SPEC", default=None,
+                    help="inject faults: ';'-separated KIND[:NODE]@AT[+DURATION][,key=value], AT in simulated s after "
+                         "the planner's start; kinds: camera_freeze, camera_stop, occlude, frame_drop (rate=), "
+                         "ble_loss (rate=), unplug, emergency, kill:NODE (restart=yes|no), clock_stall, sigstop:NODE "
+                         "(the last two in wall s). E.g. 'camera_freeze@5+5;kill:tracker_node@12'")
+    fg.add_argument("--fault-campaign", action="store_true",
+                    help="every fault of the campaign at --moments moments x --seeds seeds on --campaign-paths; one "
+                         "summary table (runs/faults_<time>/campaign.md)")
+    fg.add_argument("--fault-classes", action="store_true",
+                    help="with --fault-campaign: the reduced form, one run per fault class with several faults")
+    fg.add_argument("--campaign-paths", default="line,sine", help="paths of the campaign (comma-separated)")
+    fg.add_argument("--campaign-faults", default=None, metavar="SPEC",
+                    help="the campaign's faults instead of its default list (their times are replaced by the moments)")
+    fg.add_argument("--moments", type=int, default=3, choices=(1, 2, 3),
+                    help="moments of the path per fault: 0.2, 0.45, 0.7 of its nominal time")
+    fg.add_argument("--stuck-timeout", type=float, default=20.0,
+                    help="stop the run cleanly when the planner has not followed for this long [s simulated]")
     add_arguments(ap, PlannerSettings)
     add_arguments(ap, PathSettings, exclude=("path_type", "path_start_x", "path_start_y", "path_heading",
                                              "waypoint_file"))
@@ -531,8 +644,32 @@ def main(argv=None) -> int:
         args.path = args.path or "all"
         if args.path not in (*PATH_NAMES, "all"):
             ap.error(f"--path {args.path!r}: expected one of {', '.join(PATH_NAMES)}, all (or --replay RUN.csv)")
-        if args.paper_cost or args.seeds != 1 or args.tag_offset_deg is not None:
-            ap.error("--paper-cost, --seeds and --tag-offset-deg go with --replay / --replay-all")
+        if args.paper_cost or args.tag_offset_deg is not None or (args.seeds != 1 and not args.fault_campaign):
+            ap.error("--paper-cost and --tag-offset-deg go with --replay / --replay-all, --seeds also with "
+                     "--fault-campaign")
+    if not args.stuck_timeout > 0:
+        ap.error("--stuck-timeout must be > 0")
+    args.fault_list = ()
+    if args.faults is not None:
+        if replaying or args.fault_campaign:
+            ap.error("--faults goes with a path run (not with --replay or --fault-campaign)")
+        try:
+            args.fault_list = parse_faults(args.faults)
+        except FaultSpecError as exc:
+            ap.error(str(exc))
+    if args.fault_campaign:
+        if replaying:
+            ap.error("--fault-campaign goes without --replay")
+        bad = [p for p in args.campaign_paths.split(",") if p.strip() not in PATH_NAMES]
+        if bad:
+            ap.error(f"--campaign-paths {', '.join(bad)}: expected of {', '.join(PATH_NAMES)}")
+        if args.campaign_faults is not None:
+            try:
+                parse_faults(args.campaign_faults)
+            except FaultSpecError as exc:
+                ap.error(str(exc))
+    elif args.fault_classes or args.campaign_faults is not None:
+        ap.error("--fault-classes and --campaign-faults go with --fault-campaign")
     try:
         args.settings = from_arguments(PlannerSettings, args)
         args.path_settings = from_arguments(PathSettings, args, path_type="line")
@@ -551,13 +688,22 @@ def main(argv=None) -> int:
         except (OSError, ValueError) as exc:
             print(f"frog-twin: error: {exc}", file=sys.stderr)
             return 2
+    if args.fault_campaign:
+        from frog_twin.campaign import main_campaign
+        return main_campaign(args, root)
     out = args.out or root / "runs" / time.strftime("main_%Y%m%d_%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     names = PATH_NAMES if args.path == "all" else (args.path,)
     results = []
     for name in names:
         print(f"twin: {name} path -> {out}", flush=True)
-        results.append(run_path(args, name, out / name))
+        try:
+            results.append(run_path(args, name, out / name, faults=args.fault_list))
+        except FaultSpecError as exc:
+            print(f"frog-twin: error: {exc}", file=sys.stderr)
+            return 2
+        if args.fault_list:
+            print(twin_report_faults(results[-1]["faults"]), flush=True)
     (out / "metrics.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
     print()
     print(twin_report.summary_table(results))

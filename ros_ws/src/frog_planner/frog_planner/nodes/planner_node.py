@@ -44,6 +44,8 @@ _NODE_PARAMS = [
     Param("world_frame", "tank", "frame of the path and the status poses"),
     Param("stale_periods", 2.0, "odometry older than this many periods is stale", min=0.1, max=100.0, live=True),
     Param("autostart", True, "start following at once (else wait for ~/start)"),
+    Param("initial_progress", 0.0, "progress along the path to start from, in [0, 1] (a restarted planner "
+          "resumes where it was)", min=0.0, max=1.0),
 ]
 _PLANNER_PARAMS = params_from_dataclass(PlannerSettings)
 _PATH_PARAMS = params_from_dataclass(PathSettings)
@@ -103,6 +105,8 @@ class PlannerNode(Node):
         self.planner = None
         self.library_error = None
         self.load_library()
+        if self.planner is not None and p["initial_progress"] > 0:
+            self.planner.reset(p["initial_progress"])
         self.running = bool(p["autostart"])
         self.odom = None
         self.odom_received = None

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from frog_logger.core.log_files import read_messages
+from frog_logger.core.log_files import read_messages, recover, summarize
 
 #: Topics the analysis reads (root namespace).
 TOPICS = {
@@ -89,3 +90,31 @@ def read_twin_recording(mcap_files, with_images: bool = True) -> TwinRecording:
     for name in ("primitives", "sent", "fired", "shapes", "preview"):
         getattr(rec, name).sort(key=lambda item: item[0])
     return rec
+
+
+def readable_files(mcap_files, recovered_dir) -> list:
+    """The files, with each one cut short by a killed recorder replaced by its recovered copy.
+
+    The copy (``frog-log recover``: every complete chunk) goes to ``recovered_dir``; the
+    recorder's own files are left as they are.
+    """
+    out = []
+    for f in mcap_files:
+        if summarize(f).complete:
+            out.append(f)
+            continue
+        target = Path(recovered_dir) / Path(f).name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if not target.exists():
+            recover(f, target)
+        out.append(target)
+    return out
+
+
+def recorded_stamps(mcap_files, topics) -> dict:
+    """{topic: [header stamp]} of every message of ``topics`` in the files (the recorder's completeness)."""
+    out = {t: [] for t in topics}
+    for f in mcap_files:
+        for topic, _, m in read_messages(f, topics=list(topics)):
+            out[topic].append(_t(m.header.stamp))
+    return out

@@ -1,0 +1,101 @@
+"""``frog-twin --fault-campaign``: every fault at several moments of a path, several seeds, one table.
+
+Each run is one :func:`frog_twin.twin.run_twin` with one fault (``--fault-classes``: one
+run per fault class, several faults in it: the reduced form the system tests run). The
+summary has per fault: runs completed / stopped cleanly / failed, limb firings on state
+older than the bound (must be 0), messages the recorder lost while it was up (must be 0),
+and the time to recover (simulated s from the fault's end until the planner follows again).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import statistics
+import time
+import traceback
+from pathlib import Path
+
+from frog_twin.core.faults import CAMPAIGN_FAULTS, CAMPAIGN_MOMENTS, FAULT_CLASSES, campaign_plan, parse_faults
+
+#: the paths' nominal times [s simulated] on the twin (main job, issue 18 model), for the moments
+NOMINAL_TIME_S = {"line": 15.7, "sine": 14.3, "ellipse": 24.3}
+
+
+def _runs(args):
+    """[(label, path, seed, [Fault])] of this campaign."""
+    paths = [p.strip() for p in args.campaign_paths.split(",") if p.strip()]
+    seeds = [args.seed + i for i in range(args.seeds)]
+    if args.fault_classes:
+        return [(f"{cls}_{path}_s{seed}", path, seed, parse_faults(spec))
+                for cls, spec in FAULT_CLASSES.items() for path in paths for seed in seeds]
+    faults = CAMPAIGN_FAULTS if args.campaign_faults is None else \
+        [s.strip() for s in args.campaign_faults.split(";") if s.strip()]
+    moments = CAMPAIGN_MOMENTS[:args.moments]
+    plan = campaign_plan(faults, moments, seeds, paths, NOMINAL_TIME_S)
+    return [(f"{f.label().replace(':', '-').replace('@', '_at').replace(',', '_').replace('=', '')}_{path}_s{seed}",
+             path, seed, [f]) for path, seed, f in plan]
+
+
+def main_campaign(args, root: Path) -> int:
+    from frog_twin.twin import run_path
+    runs = _runs(args)
+    out = args.out or root / "runs" / time.strftime("faults_%Y%m%d_%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"fault campaign: {len(runs)} runs -> {out}", flush=True)
+    results = []
+    for i, (label, path, seed, faults) in enumerate(runs, 1):
+        print(f"[{i}/{len(runs)}] {label}: {'; '.join(f.label() for f in faults)}", flush=True)
+        a = copy.copy(args)
+        a.seed = seed
+        try:
+            m = run_path(a, path, out / label / path, faults=faults)
+            rep = m["faults"]
+        except Exception as exc:      # a run that breaks is a finding of the campaign, not its end
+            rep = {"outcome": "failed", "stop_reason": f"{type(exc).__name__}: {exc}",
+                   "traceback": traceback.format_exc(), "stale_firings": [], "recorder_lost": 0,
+                   "per_fault": [{"fault": f.label(), "recovery_s": None} for f in faults]}
+        rep.update(label=label, path=path, seed=seed)
+        results.append(rep)
+        print(f"    -> {rep['outcome']}" + (f" ({rep['stop_reason']})" if rep.get("stop_reason") else "")
+              + f"; stale firings {len(rep['stale_firings'])}, recorder lost {rep['recorder_lost']}", flush=True)
+        (out / "campaign.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
+    table = summary_table(results)
+    (out / "campaign.md").write_text(table + "\n")
+    print()
+    print(table)
+    print(f"\nper-run details: {out / 'campaign.json'}")
+    bad = [r for r in results if r["outcome"] == "failed"]
+    return 1 if bad else 0
+
+
+def _kind(fault_label: str) -> str:
+    """'kill:tracker_node@3' -> 'kill:tracker_node'; 'kill:tracker_node@3,restart=no' keeps ',restart=no'."""
+    head, _, rest = fault_label.partition("@")
+    return head + (",restart=no" if "restart=no" in rest else "")
+
+
+def summary_table(results) -> str:
+    """Markdown: one row per fault kind over its runs (a class run counts for each of its faults)."""
+    rows = {}
+    for r in results:
+        for pf in r["per_fault"]:
+            row = rows.setdefault(_kind(pf["fault"]), {"runs": 0, "completed": 0, "stopped": 0, "failed": 0,
+                                                       "stale": 0, "lost": 0, "recovery": [], "never": 0})
+            row["runs"] += 1
+            row[r["outcome"]] += 1
+            row["stale"] += len(r["stale_firings"])
+            row["lost"] += r["recorder_lost"]
+            if pf.get("recovery_s") is None:
+                row["never"] += 1
+            else:
+                row["recovery"].append(pf["recovery_s"])
+    lines = ["| fault | runs | completed | stopped cleanly | failed | firings on stale state | recorder lost "
+             "| recovery median / max [s] | not recovered |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for kind, row in rows.items():
+        rec = row["recovery"]
+        rec_text = f"{statistics.median(rec):.1f} / {max(rec):.1f}" if rec else "-"
+        lines.append(f"| {kind} | {row['runs']} | {row['completed']} | {row['stopped']} | {row['failed']} | "
+                     f"{row['stale']} | {row['lost']} | {rec_text} | {row['never']} |")
+    return "\n".join(lines)

@@ -1,0 +1,303 @@
+"""Faults injected into the running twin (issue 22): the spec, and what a run did under them.
+
+A fault spec is a ``;``-separated list of ``KIND[:NODE]@AT[+DURATION][,key=value...]``::
+
+    camera_freeze@10+5            the camera repeats its last frame from 10 s for 5 s
+    camera_stop@10+5              no frames at all
+    occlude@10+3                  the tag is covered (the robot under an occluder)
+    frame_drop@10+8,rate=0.5      half the frames lost
+    ble_loss@10+5,rate=0.8        80 % of the lines to the robot lost over BLE
+    unplug@10+2                   the relay's USB device gone, then back
+    emergency@10                  the robot reports EMERGENCY (latched: the run stops)
+    kill:tracker_node@10          SIGKILL; the supervisor restarts it (restart=no: it stays dead)
+    clock_stall@10+3              the simulation (and /clock) pauses for 3 wall seconds
+    sigstop:planner_node@10+4     SIGSTOP, SIGCONT 4 wall seconds later (CPU starvation)
+
+``AT`` is in simulated seconds after the planner's start; durations are simulated seconds,
+except for ``clock_stall`` and ``sigstop`` (wall seconds: a paused clock does not run).
+Pure Python: parsing, the campaign's plan, and the metrics of one run from what the twin's
+watch node saw (which does not depend on the recorder, one of the nodes under test).
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass, field, replace
+
+#: fault kind -> (needs a duration, node class it needs in the graph, its default options)
+KINDS = {
+    "camera_freeze": (True, "vision", {}),
+    "camera_stop": (True, "vision", {}),
+    "occlude": (True, "vision", {}),
+    "frame_drop": (True, "vision", {"rate": 0.5}),
+    "ble_loss": (True, "serial", {"rate": 0.8}),
+    "unplug": (True, "serial", {}),
+    "emergency": (False, "serial", {}),
+    "kill": (False, None, {"restart": "yes"}),
+    "clock_stall": (True, None, {}),
+    "sigstop": (True, None, {}),
+}
+#: nodes ``kill`` and ``sigstop`` may target (the world, sim_node, and the robot are not faults of the stack)
+TARGETS = ("tracker_node", "planner_node", "bridge_node", "recorder", "camera_sim", "image_preview")
+WALL_DURATION = ("clock_stall", "sigstop")
+
+
+@dataclass(frozen=True)
+class Fault:
+    kind: str
+    at: float                    # simulated s after the planner's start
+    duration: float = 0.0        # simulated s (wall s for clock_stall and sigstop)
+    target: str = ""
+    rate: float = math.nan
+    restart: bool = True
+
+    @property
+    def end(self) -> float:
+        """Simulated time the fault ends (its start for instant faults and wall-timed ones)."""
+        return self.at + (0.0 if self.kind in WALL_DURATION else self.duration)
+
+    def label(self) -> str:
+        s = self.kind + (f":{self.target}" if self.target else "") + f"@{self.at:g}"
+        if KINDS[self.kind][0]:
+            s += f"+{self.duration:g}"
+        if self.kind in ("frame_drop", "ble_loss"):
+            s += f",rate={self.rate:g}"
+        if self.kind == "kill" and not self.restart:
+            s += ",restart=no"
+        return s
+
+
+class FaultSpecError(ValueError):
+    """A fault spec that cannot be used; the message names the item and the problem."""
+
+
+def parse_faults(spec: str) -> list[Fault]:
+    """The faults of ``spec`` (see the module docstring), in time order."""
+    faults = []
+    for item in (s.strip() for s in spec.split(";")):
+        if item:
+            faults.append(_parse_one(item))
+    if not faults:
+        raise FaultSpecError(f"fault spec {spec!r} names no fault; e.g. 'camera_freeze@10+5;kill:tracker_node@20'")
+    return sorted(faults, key=lambda f: f.at)
+
+
+def _parse_one(item: str) -> Fault:
+    head, *opts = item.split(",")
+    if "@" not in head:
+        raise FaultSpecError(f"fault {item!r}: no '@time' (e.g. {head}@10+5)")
+    what, when = head.split("@", 1)
+    kind, _, target = what.partition(":")
+    if kind not in KINDS:
+        raise FaultSpecError(f"fault {item!r}: unknown kind {kind!r}; expected one of {', '.join(KINDS)}")
+    needs_duration, _, defaults = KINDS[kind]
+    at_text, plus, dur_text = when.partition("+")
+    try:
+        at = float(at_text)
+        duration = float(dur_text) if plus else 0.0
+    except ValueError:
+        raise FaultSpecError(f"fault {item!r}: time {when!r} is not AT[+DURATION] in seconds") from None
+    if not (math.isfinite(at) and at >= 0 and math.isfinite(duration) and duration >= 0):
+        raise FaultSpecError(f"fault {item!r}: time and duration must be finite and >= 0")
+    if needs_duration and not duration > 0:
+        raise FaultSpecError(f"fault {item!r}: {kind} needs a duration > 0 (e.g. {kind}@{at_text}+5)")
+    if not needs_duration and plus:
+        raise FaultSpecError(f"fault {item!r}: {kind} takes no duration")
+    if kind in ("kill", "sigstop"):
+        if target not in TARGETS:
+            raise FaultSpecError(f"fault {item!r}: {kind} needs a node, one of {', '.join(TARGETS)} "
+                                 f"(e.g. {kind}:tracker_node@{at_text})")
+    elif target:
+        raise FaultSpecError(f"fault {item!r}: {kind} takes no node")
+    values = dict(defaults)
+    for opt in opts:
+        key, eq, value = opt.partition("=")
+        key = key.strip()
+        if not eq or key not in defaults:
+            allowed = ", ".join(defaults) or "none"
+            raise FaultSpecError(f"fault {item!r}: option {opt!r} is not key=value with a key of {kind} ({allowed})")
+        values[key] = value.strip()
+    rate = math.nan
+    if "rate" in values:
+        try:
+            rate = float(values["rate"])
+        except ValueError:
+            rate = math.nan
+        if not 0.0 < rate <= 0.99:
+            raise FaultSpecError(f"fault {item!r}: rate must be in (0, 0.99], got {values['rate']!r}")
+    restart = True
+    if "restart" in values:
+        if values["restart"] not in ("yes", "no"):
+            raise FaultSpecError(f"fault {item!r}: restart must be yes or no, got {values['restart']!r}")
+        restart = values["restart"] == "yes"
+    return Fault(kind, at, duration, target, rate, restart)
+
+
+def check_against_graph(faults, nodes) -> None:
+    """Raise :class:`FaultSpecError` for faults whose nodes the run does not have (--no-vision, --direct)."""
+    nodes = set(nodes)
+    need = {"vision": "camera_sim", "serial": "robot_emulator"}
+    for f in faults:
+        cls = KINDS[f.kind][1]
+        if cls is not None and need[cls] not in nodes:
+            raise FaultSpecError(f"fault {f.label()}: needs {need[cls]}, which this run does not start "
+                                 f"({'--no-vision' if cls == 'vision' else '--direct'})")
+        if f.target and f.target not in nodes:
+            raise FaultSpecError(f"fault {f.label()}: node {f.target} is not in this run")
+
+
+# -- the campaign's plan -------------------------------------------------------------------------
+#: one representative of each fault the campaign runs; durations longer than the planner's
+#: stale bound (2 periods = 2.9 s) where staleness is what the fault tests
+CAMPAIGN_FAULTS = (
+    "camera_freeze@0+5", "camera_stop@0+5", "occlude@0+4", "frame_drop@0+8,rate=0.5", "ble_loss@0+5,rate=0.8",
+    "unplug@0+2", "emergency@0", "kill:tracker_node@0", "kill:planner_node@0", "kill:bridge_node@0",
+    "kill:recorder@0", "kill:camera_sim@0", "kill:tracker_node@0,restart=no", "clock_stall@0+3",
+    "sigstop:planner_node@0+4", "sigstop:tracker_node@0+4",
+)
+#: the moments of a path a fault is injected at, as fractions of the path's nominal time
+CAMPAIGN_MOMENTS = (0.2, 0.45, 0.7)
+#: one fault class per reduced run (system tests, on the ellipse: 24 s nominal, room for several)
+FAULT_CLASSES = {
+    "camera": "camera_freeze@3+5;camera_stop@10+4;occlude@16+4;frame_drop@21+4,rate=0.5",
+    "link": "ble_loss@3+4,rate=0.8;unplug@10+2",
+    "process": "kill:tracker_node@3;kill:planner_node@9;sigstop:bridge_node@14+3;kill:recorder@18;"
+               "kill:camera_sim@21",
+    "time": "clock_stall@5+3;sigstop:tracker_node@10+4",
+    "emergency": "emergency@6",
+    "dead_node": "kill:tracker_node@4,restart=no",
+}
+
+
+def campaign_plan(faults, moments, seeds, paths, path_times):
+    """[(path, seed, Fault at its moment)] of the full campaign; ``path_times`` = {path: nominal s}."""
+    plan = []
+    for path in paths:
+        for text in faults:
+            base = parse_faults(text)[0]
+            for m in moments:
+                for seed in seeds:
+                    plan.append((path, seed, replace(base, at=round(m * path_times[path], 1))))
+    return plan
+
+
+# -- metrics of one run --------------------------------------------------------------------------
+@dataclass
+class Observed:
+    """What the twin's watch node saw (sim-time stamps [s]), independent of the recorder."""
+
+    odom: list = field(default_factory=list)          # stamps of frog/odom (what the planner decides on)
+    decisions: list = field(default_factory=list)     # (stamp, primitive name) of frog/primitive
+    fired: list = field(default_factory=list)         # stamps of frog/limb_activation (the robot fired)
+    status: list = field(default_factory=list)        # (stamp, state) of frog/planner/status
+
+
+def content_time(stamp: float, faults) -> float:
+    """When the information behind an odometry stamped ``stamp`` was seen by the camera.
+
+    Frames of a frozen camera are the frame at the freeze's start; during an occlusion the
+    tracker's odometry is a prediction from the last detection, at the occlusion's start.
+    Otherwise a stamp is its content's time.
+    """
+    for f in faults:
+        if f.kind in ("camera_freeze", "occlude") and f.at < stamp <= f.end:
+            return f.at
+    return stamp
+
+
+def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float) -> list[dict]:
+    """Limb firings on state older than the bounds: one dict per offending firing.
+
+    A firing at ``t`` comes from the last non-I primitive decided at ``t_d <= t``. Its state
+    is stale when the newest odometry before ``t_d`` holds information older than
+    ``pose_bound`` at ``t_d`` (:func:`content_time`), or when the command is older than
+    ``command_bound`` when it fires (a replayed or queued command).
+    """
+    odom = sorted(obs.odom)
+    decisions = sorted((t, n) for t, n in obs.decisions if n != "I")
+    d_times = [t for t, _ in decisions]
+    bad = []
+    for t in sorted(obs.fired):
+        i = bisect.bisect_right(d_times, t + 1e-6) - 1
+        if i < 0:
+            bad.append({"fired": t, "why": "no primitive was decided before it"})
+            continue
+        t_d = d_times[i]
+        j = bisect.bisect_right(odom, t_d + 1e-6) - 1
+        if j < 0:
+            bad.append({"fired": t, "decided": t_d, "why": "decided before any odometry"})
+            continue
+        pose_age = t_d - content_time(odom[j], faults)
+        if pose_age > pose_bound or t - t_d > command_bound:
+            bad.append({"fired": t, "decided": t_d, "pose_age": pose_age, "command_age": t - t_d})
+    return bad
+
+
+def recovery_time(status, t_end: float, following: int) -> float | None:
+    """Simulated s from ``t_end`` until the planner follows again (0 if it never stopped); None if never."""
+    rows = sorted(status)
+    blocked = [(t, s) for t, s in rows if t >= t_end]
+    if not blocked:
+        return None
+    for t, s in blocked:
+        if s == following:
+            return max(0.0, t - t_end)
+    return None
+
+
+def recorder_losses(seen: dict, recorded: dict, up_intervals, margin: float = 1.0, excluded=()) -> dict:
+    """Per topic, the messages the watch saw while the recorder was up that the MCAP lacks.
+
+    ``seen`` / ``recorded``: {topic: [stamp]}; ``up_intervals``: [(t0, t1)] in the same
+    clock, the recorder's subscriptions live; a message within ``margin`` of an interval's
+    ends is not counted (discovery and the kill are not instantaneous), nor one inside an
+    ``excluded`` interval (a restarted node's first seconds, before DDS has matched its new
+    publishers with the recorder: the recorder never saw those messages).
+    """
+    def expected(s):
+        return (any(a + margin <= s <= b - margin for a, b in up_intervals)
+                and not any(a <= s <= b for a, b in excluded))
+
+    out = {}
+    for topic, stamps in seen.items():
+        have = set(round(s, 6) for s in recorded.get(topic, ()))
+        want = [s for s in stamps if expected(s)]
+        missing = [s for s in want if round(s, 6) not in have]
+        out[topic] = {"expected": len(want), "lost": len(missing), "first_lost": missing[:3]}
+    return out
+
+
+def outcome(goal: bool, stop_reason, stale: int, lost: int, unclean) -> str:
+    """completed (goal reached) / stopped (cleanly, for a stated reason) / failed."""
+    if stale or lost or unclean:
+        return "failed"
+    if goal:
+        return "completed"
+    return "stopped" if stop_reason else "failed"
+
+
+def fault_report(faults, observer, sim_start: float, injector, recorded: dict, pose_bound: float,
+                 command_bound: float, goal: bool, stop_reason, unclean) -> dict:
+    """The fault section of a run's metrics: outcome, stale firings, recorder losses, recovery."""
+    obs = observer.obs
+    shifted = [replace(f, at=f.at + sim_start) for f in faults]
+    stale = stale_firings(obs, shifted, pose_bound, command_bound)
+    losses = recorder_losses(observer.seen, recorded, observer.recorder_up, excluded=observer.discovery_gaps)
+    lost = sum(v["lost"] for v in losses.values())
+    per_fault = []
+    following = 1   # PlannerStatus.STATE_FOLLOWING
+    for f, g in zip(faults, shifted):
+        # the end of a wall-timed fault is when its undo action ran
+        ends = [t for t, _, what in injector.done if what.startswith(f.label() + ":")]
+        t_end = max(ends) if ends else g.end
+        rec = None if f.kind == "emergency" else recovery_time(obs.status, t_end, following)
+        per_fault.append({"fault": f.label(), "end_s": t_end - sim_start, "recovery_s": rec})
+    return {"outcome": outcome(goal, stop_reason, len(stale), lost, unclean),
+            "stop_reason": None if goal else stop_reason,
+            "stale_firings": stale, "n_firings": len(obs.fired), "pose_bound_s": pose_bound,
+            "last_firing_s": max(obs.fired) - sim_start if obs.fired else None,
+            "command_bound_s": command_bound, "recorder": losses, "recorder_lost": lost,
+            "recorder_up": observer.recorder_up, "discovery_gaps": observer.discovery_gaps, "per_fault": per_fault,
+            "actions": [(t - sim_start, what) for t, _, what in injector.done],
+            "injector_failures": injector.failures(), "unclean_stops": list(unclean)}

@@ -1,0 +1,228 @@
+"""The twin's fault injector and observer (issue 22), on the twin's watch node.
+
+:class:`FaultInjector` turns :class:`frog_twin.core.faults.Fault` items into actions at
+their simulated times: live parameters of camera_sim, robot_emulator and sim_node (their
+fault hooks), the emulator's fault services, and signals to node processes through the
+run's :class:`soft_robot_common.supervision.Supervisor`. :class:`RunObserver` records what
+the metrics need (odometry stamps, decisions, firings, planner states, the recorder's
+subscriptions) on the watch's own subscriptions, so the record does not depend on the
+recorder, which is one of the nodes under test.
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+
+from frog_twin.core.faults import Observed
+
+#: simulated s after a node's restart in which the recorder may not yet have matched its publishers
+DISCOVERY_S = 3.0
+#: topics whose messages the recorder must not lose while it is up (stamped, reliable)
+CHECKED_TOPICS = ("/frog/primitive", "/frog/planner/status", "/frog/bridge/sent", "/frog/limb_activation")
+
+
+def _stamp(msg) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+class RunObserver:
+    """Subscriptions of the watch node: sim time, odometry, decisions, firings, diagnostics."""
+
+    def __init__(self, node):
+        from diagnostic_msgs.msg import DiagnosticArray
+        from nav_msgs.msg import Odometry
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+        from soft_robot_interfaces.msg import LimbActivation, PlannerStatus, Primitive
+        self.node = node
+        self.obs = Observed()
+        self.seen = {t: [] for t in CHECKED_TOPICS}
+        self.sim_now = None
+        self.emergency = None
+        self.recorder_up = []           # [(sim t0, sim t1)] with the recorder subscribed to CHECKED_TOPICS
+        self.discovery_gaps = []        # [(sim t0, sim t1)] after a node's restart (see DISCOVERY_S)
+        self._up_since = None
+        reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        node.create_subscription(Clock, "/clock", self._on_clock, QoSProfile(depth=1,
+                                 reliability=ReliabilityPolicy.BEST_EFFORT))
+        node.create_subscription(Odometry, "/frog/odom", lambda m: self.obs.odom.append(_stamp(m)), reliable)
+        node.create_subscription(Primitive, "/frog/primitive", self._on_primitive, reliable)
+        node.create_subscription(PlannerStatus, "/frog/planner/status", self._on_status, reliable)
+        node.create_subscription(LimbActivation, "/frog/bridge/sent",
+                                 lambda m: self.seen["/frog/bridge/sent"].append(_stamp(m)), reliable)
+        node.create_subscription(LimbActivation, "/frog/limb_activation", self._on_fired, reliable)
+        node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, reliable)
+
+    def _on_clock(self, msg) -> None:
+        self.sim_now = msg.clock.sec + msg.clock.nanosec * 1e-9
+
+    def _on_primitive(self, msg) -> None:
+        t = _stamp(msg)
+        self.seen["/frog/primitive"].append(t)
+        self.obs.decisions.append((t, msg.name))
+
+    def _on_status(self, msg) -> None:
+        t = _stamp(msg)
+        self.seen["/frog/planner/status"].append(t)
+        self.obs.status.append((t, int(msg.state)))
+
+    def _on_fired(self, msg) -> None:
+        t = _stamp(msg)
+        self.seen["/frog/limb_activation"].append(t)
+        if len(msg.limbs):
+            self.obs.fired.append(t)
+
+    def _on_diagnostics(self, msg) -> None:
+        for st in msg.status:
+            if "serial link" in st.name and "EMERGENCY" in st.message and self.emergency is None:
+                self.emergency = st.message
+
+    def node_restarted(self) -> None:
+        if self.sim_now is not None:
+            self.discovery_gaps.append((self.sim_now, self.sim_now + DISCOVERY_S))
+
+    def watch_recorder(self, subscribed: bool) -> None:
+        """Called every poll with whether the recorder is subscribed to every checked topic."""
+        if self.sim_now is None:
+            return
+        if subscribed and self._up_since is None:
+            self._up_since = self.sim_now
+        elif not subscribed and self._up_since is not None:
+            self.recorder_up.append((self._up_since, self.sim_now))
+            self._up_since = None
+
+    def close_recorder_interval(self, recorder_running: bool) -> None:
+        if self._up_since is not None and recorder_running:
+            self.recorder_up.append((self._up_since, self.sim_now))
+        self._up_since = None
+
+
+class FaultInjector:
+    """Runs the faults' actions when the simulated clock (``sim_t`` after the planner's start) reaches them."""
+
+    def __init__(self, node, faults, supervisor, log=print):
+        self.node = node
+        self.supervisor = supervisor
+        self.log = log
+        self.pending = []          # (sim time, wall deadline or None, description, action)
+        self.done = []             # (sim time, wall time, description) of actions taken
+        self._clients = {}
+        self._futures = []
+        self._sim_abs = 0.0         # /clock at the last tick
+        for f in faults:
+            self._plan(f)
+        self.pending.sort(key=lambda a: a[0])
+
+    # -- plan ---------------------------------------------------------------------------------
+    def _plan(self, f) -> None:
+        at, end = f.at, f.at + f.duration
+        k = f.kind
+        if k == "camera_freeze":
+            self._at(at, f"{f.label()}: camera frozen", lambda: self._set("camera_sim", fault_freeze=True))
+            self._at(end, f"{f.label()}: camera live", lambda: self._set("camera_sim", fault_freeze=False))
+        elif k == "camera_stop":
+            self._at(at, f"{f.label()}: camera stopped", lambda: self._set("camera_sim", fault_stopped=True))
+            self._at(end, f"{f.label()}: camera running", lambda: self._set("camera_sim", fault_stopped=False))
+        elif k == "occlude":
+            # camera_sim's occluder runs on its node clock (simulated time): from now for the duration
+            self._at(at, f"{f.label()}: tag covered", lambda: self._set(
+                "camera_sim", occlusion_start_s=float(self._sim_abs), occlusion_duration_s=float(f.duration)))
+        elif k == "frame_drop":
+            self._at(at, f"{f.label()}: frames dropped", lambda: self._set("camera_sim", drop_probability=f.rate))
+            self._at(end, f"{f.label()}: no drops", lambda: self._set("camera_sim", drop_probability=0.0))
+        elif k == "ble_loss":
+            self._at(at, f"{f.label()}: BLE losses", lambda: self._set("robot_emulator", loss_rate=f.rate))
+            self._at(end, f"{f.label()}: BLE clean", lambda: self._set("robot_emulator", loss_rate=0.0))
+        elif k == "unplug":      # the emulator stays unplugged until ~/replug (unplug_duration_s 0)
+            self._at(at, f"{f.label()}: relay unplugged", lambda: self._call("robot_emulator", "unplug"))
+            self._at(end, f"{f.label()}: relay plugged in", lambda: self._call("robot_emulator", "replug"))
+        elif k == "emergency":
+            self._at(at, f"{f.label()}: EMERGENCY", lambda: self._call("robot_emulator", "inject_emergency"))
+        elif k == "kill":
+            def kill():
+                if not f.restart:
+                    self.supervisor.release(f.target, "killed by the fault injector, not restarted")
+                self.supervisor.process(f.target).send(signal.SIGKILL)
+            self._at(at, f"{f.label()}: SIGKILL {f.target}", kill)
+        elif k == "clock_stall":
+            self._at(at, f"{f.label()}: clock paused", lambda: self._set("sim_node", paused=True),
+                     wall_after=(f.duration, f"{f.label()}: clock running",
+                                 lambda: self._set("sim_node", paused=False)))
+        elif k == "sigstop":
+            self._at(at, f"{f.label()}: SIGSTOP {f.target}",
+                     lambda: self.supervisor.process(f.target).send(signal.SIGSTOP),
+                     wall_after=(f.duration, f"{f.label()}: SIGCONT {f.target}",
+                                 lambda: self.supervisor.process(f.target).send(signal.SIGCONT)))
+
+    def _at(self, t, what, action, wall_after=None) -> None:
+        self.pending.append((t, None, what, action, wall_after))
+
+    # -- run ----------------------------------------------------------------------------------
+    def tick(self, sim_t: float, sim_abs: float) -> None:
+        """Take every action due at ``sim_t`` (s after the planner's start; ``sim_abs`` = /clock)."""
+        self._sim_abs = sim_abs
+        now = time.monotonic()
+        keep = []
+        for t, deadline, what, action, after in self.pending:
+            due = (deadline is not None and now >= deadline) or (deadline is None and sim_t >= t)
+            if not due:
+                keep.append((t, deadline, what, action, after))
+                continue
+            try:
+                action()
+                self.done.append((sim_abs, now, what))
+                self.log(f"  fault: {what} (t = {sim_t:.1f} s)")
+            except Exception as exc:        # a fault that cannot be applied is reported, the run goes on
+                self.done.append((sim_abs, now, f"{what} FAILED: {exc}"))
+                self.log(f"  fault: {what} FAILED: {exc}")
+            if after is not None:
+                wall_s, what2, action2 = after
+                keep.append((t, now + wall_s, what2, action2, None))
+        self.pending = keep
+
+    def finish(self) -> None:
+        """Undo what must not outlive the run (a SIGSTOPped process could not be stopped cleanly)."""
+        for t, deadline, what, action, after in self.pending:
+            if deadline is not None:
+                try:
+                    action()
+                except Exception:
+                    pass
+        self.pending = []
+
+    # -- actions ------------------------------------------------------------------------------
+    def _client(self, kind, name: str):
+        if name not in self._clients:
+            self._clients[name] = self.node.create_client(kind, name)
+        return self._clients[name]
+
+    def _set(self, node_name: str, **values) -> None:
+        from rcl_interfaces.srv import SetParameters
+        from rclpy.parameter import Parameter
+        client = self._client(SetParameters, f"/{node_name}/set_parameters")
+        if not client.service_is_ready():
+            raise RuntimeError(f"/{node_name}/set_parameters is not available")
+        req = SetParameters.Request(parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()])
+        self._futures.append((f"set {values} on {node_name}", client.call_async(req)))
+
+    def _call(self, node_name: str, service: str) -> None:
+        from std_srvs.srv import Trigger
+        client = self._client(Trigger, f"/{node_name}/{service}")
+        if not client.service_is_ready():
+            raise RuntimeError(f"/{node_name}/{service} is not available")
+        self._futures.append((f"{node_name}/{service}", client.call_async(Trigger.Request())))
+
+    def failures(self) -> list[str]:
+        """Parameter sets and service calls that were refused (checked after the run)."""
+        out = []
+        for what, fut in self._futures:
+            if not fut.done():
+                out.append(f"{what}: no reply")
+                continue
+            res = fut.result()
+            if hasattr(res, "results"):
+                out += [f"{what}: {r.reason}" for r in res.results if not r.successful]
+            elif hasattr(res, "success") and not res.success:
+                out.append(f"{what}: {res.message}")
+        return out

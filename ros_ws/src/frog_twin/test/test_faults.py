@@ -1,0 +1,127 @@
+"""The fault spec, the campaign plan and the run metrics of frog_twin.core.faults (no ROS)."""
+
+import math
+
+import pytest
+
+from frog_twin.core.faults import (
+    CAMPAIGN_FAULTS, FAULT_CLASSES, Fault, FaultSpecError, Observed, campaign_plan, check_against_graph,
+    content_time, outcome, parse_faults, recorder_losses, recovery_time, stale_firings)
+
+
+def test_spec_round_trips_through_labels_and_sorts_by_time():
+    faults = parse_faults("kill:planner_node@12,restart=no; camera_freeze@4+5 ;frame_drop@1+2,rate=0.3")
+    assert [f.kind for f in faults] == ["frame_drop", "camera_freeze", "kill"]
+    assert faults[0].rate == 0.3 and faults[1].duration == 5 and not faults[2].restart
+    again = parse_faults(";".join(f.label() for f in faults))
+    assert again == faults
+    assert parse_faults("ble_loss@2+3")[0].rate == 0.8      # the default rate
+    # every shipped campaign and class spec parses
+    for spec in (*CAMPAIGN_FAULTS, *FAULT_CLASSES.values()):
+        parse_faults(spec)
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("", "names no fault"),
+    ("camera_freeze", "no '@time'"),
+    ("melt@3", "unknown kind 'melt'"),
+    ("camera_freeze@3", "needs a duration"),
+    ("emergency@3+2", "takes no duration"),
+    ("kill@3", "needs a node"),
+    ("kill:sim_node@3", "needs a node"),
+    ("occlude:tracker_node@3+1", "takes no node"),
+    ("frame_drop@3+1,rate=1.5", "rate must be in (0, 0.99]"),
+    ("frame_drop@3+1,rate=nan", "rate must be in"),
+    ("kill:recorder@3,restart=maybe", "restart must be yes or no"),
+    ("kill:recorder@3,rate=0.1", "option 'rate=0.1'"),
+    ("occlude@-1+2", "finite and >= 0"),
+    ("occlude@x+2", "is not AT[+DURATION]"),
+    ("occlude@3+inf", "finite"),
+])
+def test_bad_specs_name_the_item_and_the_problem(spec, words):
+    with pytest.raises(FaultSpecError) as err:
+        parse_faults(spec)
+    assert words in str(err.value)
+
+
+def test_faults_need_their_nodes():
+    check_against_graph(parse_faults("occlude@3+1;kill:bridge_node@4"), ["camera_sim", "bridge_node"])
+    with pytest.raises(FaultSpecError, match="--no-vision"):
+        check_against_graph(parse_faults("occlude@3+1"), ["sim_node", "planner_node"])
+    with pytest.raises(FaultSpecError, match="--direct"):
+        check_against_graph(parse_faults("unplug@3+1"), ["sim_node", "camera_sim"])
+    with pytest.raises(FaultSpecError, match="tracker_node is not in this run"):
+        check_against_graph(parse_faults("kill:tracker_node@3"), ["sim_node", "robot_emulator"])
+
+
+def test_campaign_plan_is_the_full_product():
+    plan = campaign_plan(["occlude@0+4", "emergency@0"], (0.2, 0.5), (1, 2, 3), ("line", "sine"),
+                         {"line": 10.0, "sine": 20.0})
+    assert len(plan) == 2 * 2 * 2 * 3
+    assert {f.at for p, s, f in plan if p == "sine"} == {4.0, 10.0}
+    assert all(f.duration == 4.0 for _, _, f in plan if f.kind == "occlude")
+
+
+def test_content_time_of_frozen_and_occluded_odometry():
+    faults = [Fault("camera_freeze", 10.0, 5.0), Fault("occlude", 30.0, 2.0)]
+    assert content_time(9.9, faults) == 9.9
+    assert content_time(12.0, faults) == 10.0 and content_time(15.0, faults) == 10.0
+    assert content_time(15.1, faults) == 15.1
+    assert content_time(31.0, faults) == 30.0
+
+
+def _observed(odom_until, decide_every=1.43, fire_delay=0.05, end=20.0):
+    """Odometry at 30 Hz until ``odom_until``, a decision every period, a firing after each."""
+    obs = Observed()
+    obs.odom = [i / 30 for i in range(int(odom_until * 30))]
+    t = 0.5
+    while t < end:
+        obs.decisions.append((t, "B"))
+        obs.fired.append(t + fire_delay)
+        t += decide_every
+    return obs
+
+
+def test_stale_firings_flag_decisions_on_old_state_and_old_commands():
+    fresh = _observed(odom_until=20.0)
+    assert stale_firings(fresh, [], pose_bound=3.0, command_bound=0.7) == []
+    # odometry stops at 5 s and the planner goes on deciding: firings after 8 s are on stale state
+    blind = _observed(odom_until=5.0)
+    bad = stale_firings(blind, [], pose_bound=3.0, command_bound=0.7)
+    assert bad and all(b["decided"] - 5.0 > 3.0 - 0.04 for b in bad)
+    assert len(bad) == sum(1 for t, _ in blind.decisions if t - (5.0 - 1 / 30) > 3.0)
+    # a frozen camera with fresh stamps is just as stale
+    frozen = stale_firings(fresh, [Fault("camera_freeze", 5.0, 10.0)], 3.0, 0.7)
+    assert frozen and all(8.0 < b["decided"] <= 15.0 for b in frozen)
+    # a command replayed late
+    late = _observed(odom_until=20.0, fire_delay=1.0)
+    assert len(stale_firings(late, [], 3.0, 0.7)) == len(late.fired)
+    # primitive I never fires anything: a firing with only I decided before it is flagged
+    only_i = Observed(odom=[0.0, 1.0], decisions=[(0.5, "I")], fired=[0.6])
+    assert stale_firings(only_i, [], 3.0, 0.7)[0]["why"] == "no primitive was decided before it"
+
+
+def test_recovery_time_and_outcome():
+    status = [(t, 1) for t in (1, 2, 3)] + [(4, 3), (5, 3), (6, 3)] + [(7.5, 1), (9, 1)]
+    assert recovery_time(status, 6.2, 1) == pytest.approx(1.3)
+    assert recovery_time(status, 2.5, 1) == pytest.approx(0.5)     # still following after the fault: ~0
+    assert recovery_time(status[:6], 4.5, 1) is None
+    assert outcome(True, None, 0, 0, []) == "completed"
+    assert outcome(False, "emergency", 0, 0, []) == "stopped"
+    assert outcome(True, None, 1, 0, []) == "failed"
+    assert outcome(True, None, 0, 2, []) == "failed"
+    assert outcome(False, "x", 0, 0, ["tracker_node"]) == "failed"
+
+
+def test_recorder_losses_count_only_inside_the_up_intervals():
+    seen = {"/a": [float(t) for t in range(20)]}
+    recorded = {"/a": [t for t in range(20) if t not in (5, 12, 18)]}
+    up = [(0.0, 10.0), (13.0, 19.5)]
+    res = recorder_losses(seen, recorded, up, margin=1.0)["/a"]
+    # 5 inside [1, 9], 12 is outside (down), 18 inside [14, 18.5]
+    assert res["lost"] == 2 and res["first_lost"] == [5.0, 18.0]
+    assert res["expected"] == len([t for t in range(20) if 1 <= t <= 9 or 14 <= t <= 18.5])
+    assert not math.isnan(res["expected"])
+    # a restarted publisher's first seconds are not the recorder's loss
+    res = recorder_losses(seen, recorded, up, margin=1.0, excluded=[(17.5, 20.0)])["/a"]
+    assert res["lost"] == 1 and res["first_lost"] == [5.0]
