@@ -255,6 +255,8 @@ def twin_graph(args, name: str, out: Path, path_settings, settings, start_pose, 
                                        "command_log": str(out / "robot_commands.csv")}
         overrides["bridge_node"] = {"port": str(out / "robot_tty")}
     exclude = (*(VISION_NODES if args.no_vision else ()), *(SERIAL_NODES if args.direct else ()))
+    for node, values in getattr(args, "node_params", {}).items():     # --node-param, last
+        overrides.setdefault(node, {}).update(values)
     return load_graph(graph_file, "sim", overrides, exclude=exclude)
 
 
@@ -267,6 +269,22 @@ def _restarter(node, domain, out: Path, watch):
                                                                                    watch.last.path_progress))))
         return node.start(domain.env, out, label)
     return start
+
+
+def parse_node_params(items) -> dict:
+    """``["tracker_node:frozen_frames=5", ...]`` -> ``{"tracker_node": {"frozen_frames": 5}}`` (YAML values)."""
+    import yaml
+    out: dict = {}
+    for item in items:
+        node, colon, rest = item.partition(":")
+        name, eq, value = rest.partition("=")
+        if not (colon and eq and node and name):
+            raise ValueError(f"--node-param {item!r}: expected NODE:NAME=VALUE, e.g. tracker_node:frozen_frames=5")
+        try:
+            out.setdefault(node, {})[name] = yaml.safe_load(value)
+        except yaml.YAMLError as exc:
+            raise ValueError(f"--node-param {item!r}: value {value!r} is not YAML ({exc})") from None
+    return out
 
 
 def twin_report_faults(rep: dict) -> str:
@@ -608,6 +626,9 @@ def main(argv=None) -> int:
                     help="the campaign's faults instead of its default list (their times are replaced by the moments)")
     fg.add_argument("--moments", type=int, default=3, choices=(1, 2, 3),
                     help="moments of the path per fault: 0.2, 0.45, 0.7 of its nominal time")
+    ap.add_argument("--node-param", action="append", default=[], metavar="NODE:NAME=VALUE",
+                    help="set a node's parameter for this run (YAML value; repeatable), e.g. "
+                         "--node-param tracker_node:frozen_frames=5 --node-param planner_node:stale_periods=3")
     fg.add_argument("--stuck-timeout", type=float, default=20.0,
                     help="stop the run cleanly when the planner has not followed for this long [s simulated]")
     add_arguments(ap, PlannerSettings)
@@ -649,6 +670,10 @@ def main(argv=None) -> int:
                      "--fault-campaign")
     if not args.stuck_timeout > 0:
         ap.error("--stuck-timeout must be > 0")
+    try:
+        args.node_params = parse_node_params(args.node_param)
+    except ValueError as exc:
+        ap.error(str(exc))
     args.fault_list = ()
     if args.faults is not None:
         if replaying or args.fault_campaign:
@@ -699,7 +724,7 @@ def main(argv=None) -> int:
         print(f"twin: {name} path -> {out}", flush=True)
         try:
             results.append(run_path(args, name, out / name, faults=args.fault_list))
-        except FaultSpecError as exc:
+        except (FaultSpecError, GraphError) as exc:
             print(f"frog-twin: error: {exc}", file=sys.stderr)
             return 2
         if args.fault_list:
