@@ -6,7 +6,7 @@ import math
 import cv2
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
@@ -162,6 +162,81 @@ def test_tracker_bad_input_and_lost_tag(launch, probe):
     late = [m for m in est[n_before:] if _t(m.header.stamp) > 2.0 + 44 / 30 + 0.3 + 1e-3]
     assert not late, "stale odometry was published after the coast timeout"
     assert any("lost" in s.message for d in diags[-3:] for s in d.status)
+    assert trk.stop() == 0
+
+
+def test_frozen_camera_stops_odometry_until_the_frames_change(launch, probe):
+    """A driver repeating its last image with fresh stamps: from the frozen_frames-th identical frame on no
+    odometry, one warning, diagnostics ERROR; frames that change again are tracked again."""
+    import re
+    import time
+    from frog_vision.core.camera_model import CameraModel
+    from frog_vision.core.renderer import RenderSettings, TankRenderer
+    from frog_vision.core.tank_calibration import CameraPose
+    from frog_vision.nodes.messages import array_to_image, camera_info_msg, s_to_stamp
+    model = CameraModel.realsense_640x480()
+    renderer = TankRenderer(model, CameraPose.overhead(0.8), RenderSettings(noise_sigma=2.0))
+    trk = launch("tracker_node", params={"frozen_frames": 3})
+    est, diags = [], []
+    probe.node.create_subscription(Odometry, "/frog/odom", est.append, QOS)
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
+    pub_img = probe.node.create_publisher(Image, "/camera/image_raw", 10)
+    pub_info = probe.node.create_publisher(CameraInfo, "/camera/camera_info", 10)
+    trk.wait_for_log("tracking tagStandard41h12 id 47", timeout=60)
+    probe.wait_for_subscriber("/camera/image_raw", timeout=20)
+    clock = {"t": 2.0}                              # capture stamps [s], 30 fps, always advancing
+
+    def publish(frame):
+        clock["t"] += 1 / 30
+        stamp = s_to_stamp(clock["t"])
+        pub_info.publish(camera_info_msg(model, stamp, "camera"))
+        pub_img.publish(array_to_image(frame, stamp, "camera"))
+        probe.spin_for(1 / 30)
+        return round(clock["t"], 6)
+
+    def swim_until(predicate, timeout, what):
+        """Publish live frames (a robot at 2 cm/s, fresh noise) until ``predicate``."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            publish(renderer.render(np.array([0.02 * clock["t"] - 0.1, 0.0, 0.0]), (0.02, 0.0, 0.0)))
+            if predicate():
+                return
+        raise TimeoutError(f"{what} not reached within {timeout} s")
+
+    def stamps(msgs):
+        return {round(_t(m.header.stamp), 6) for m in msgs}
+
+    def tracker_status():
+        found = [s for d in diags for s in d.status if "tag tracking" in s.name]
+        return found[-1] if found else None
+
+    swim_until(lambda: len(est) >= 10, 30, "odometry from live frames")
+    # frozen: the same bytes again and again, with fresh stamps
+    frozen = renderer.render(np.array([0.02 * clock["t"] - 0.1, 0.0, 0.0]), (0.02, 0.0, 0.0))
+    copies = []
+    end = time.monotonic() + 30
+    while not re.search("camera frozen", trk.log_text()) or len(copies) < 20:
+        assert time.monotonic() < end, "the tracker never reported the frozen camera"
+        copies.append(publish(frozen))
+    probe.spin_until(lambda: tracker_status() is not None and tracker_status().message.startswith("camera frozen")
+                     and int({kv.key: kv.value for kv in tracker_status().values}["frozen_frames_refused"]) >= 10,
+                     10, "diagnostics: camera frozen, frames refused")
+    assert tracker_status().level == DiagnosticStatus.ERROR
+    from_copies = stamps(est) & set(copies)
+    # the first copy is a new frame and the second may still be used; never a third
+    assert len(from_copies) <= 2 and not from_copies - set(copies[:2]), (sorted(from_copies), copies[:3])
+    assert trk.log_text().count("camera frozen:") == 1, "the freeze is logged once"
+    m = re.search(r"camera frozen: (\d+) identical frames", trk.log_text())
+    assert m and m.group(1) == "3"
+    # a frame whose stamp does not advance is refused
+    pub_img.publish(array_to_image(frozen, s_to_stamp(clock["t"]), "camera"))
+    trk.wait_for_log(r"is not newer than the last", timeout=10)
+    # the frames change again: odometry again, stamped with the new frames
+    n_before = len(est)
+    swim_until(lambda: len(est) > n_before + 5, 30, "odometry after the freeze")
+    assert not stamps(est[n_before:]) & set(copies)
+    trk.wait_for_log(r"camera frames change again after \d+ frozen frame\(s\): tracking resumes", timeout=10)
+    probe.spin_until(lambda: tracker_status().message == "tracking", 10, "diagnostics: tracking")
     assert trk.stop() == 0
 
 
