@@ -240,6 +240,99 @@ def test_frozen_camera_stops_odometry_until_the_frames_change(launch, probe):
     assert trk.stop() == 0
 
 
+def test_camera_sim_fault_hooks_through_the_tracker(launch, probe):
+    """The fault injector's live parameters on camera_sim -> tracker_node (system clock, the odometry of a still
+    robot from the probe): freeze (the same bytes, fresh stamps: the tracker stops), stop (no frames or
+    camera_info), occlusion from now (tag lost), drops."""
+    import time
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    cam = launch("camera_sim", params={"fps": 10.0})
+    trk = launch("tracker_node", params={"frozen_frames": 3})
+    images, infos, est, diags = [], [], [], []
+    probe.node.create_subscription(Image, "/camera/image_raw", images.append, QOS)
+    probe.node.create_subscription(CameraInfo, "/camera/camera_info", infos.append, QOS)
+    probe.node.create_subscription(Odometry, "/frog/odom", est.append, QOS)
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
+    odom_pub = probe.node.create_publisher(Odometry, "/frog/sim/odom", QOS)
+
+    def still_robot():
+        m = Odometry()
+        m.header.stamp = probe.node.get_clock().now().to_msg()
+        m.header.frame_id, m.child_frame_id = "tank", "frog"
+        m.pose.pose.orientation.z, m.pose.pose.orientation.w = math.sin(0.2), math.cos(0.2)
+        odom_pub.publish(m)
+    probe.node.create_timer(0.02, still_robot)          # runs while the probe spins
+    setter = probe.node.create_client(SetParameters, "/camera_sim/set_parameters")
+    probe.wait_for_service(setter, timeout=60)
+
+    def set_param(name, value):
+        v = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value) if isinstance(value, bool) else \
+            ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(value))
+        assert probe.call(setter, SetParameters.Request(parameters=[ParameterMsg(name=name, value=v)])) \
+            .results[0].successful, name
+        return time.time()
+
+    def after(msgs, t):
+        return [m for m in msgs if _t(m.header.stamp) > t]
+
+    def cam_status():
+        found = [s for d in diags for s in d.status if "camera simulator" in s.name]
+        return found[-1] if found else None
+
+    def cam_value(key):
+        st = cam_status()
+        return {kv.key: kv.value for kv in st.values}.get(key) if st is not None else None
+
+    probe.spin_until(lambda: len(est) >= 5, 90, "odometry of the rendered frames")
+    live = images[-3:]
+    assert len({bytes(m.data) for m in live}) == 3, "live frames carry noise: never byte-identical"
+
+    # freeze: the same bytes with fresh, advancing stamps; the tracker reports the frozen camera and stops
+    t_freeze = set_param("fault_freeze", True)
+    probe.spin_until(lambda: len(after(images, t_freeze)) >= 4, 15, "frozen frames")
+    frozen = after(images, t_freeze)
+    assert len({bytes(m.data) for m in frozen}) == 1
+    stamps = [_t(m.header.stamp) for m in frozen]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    trk.wait_for_log("camera frozen: 3 identical frames", timeout=15)
+    probe.spin_until(lambda: cam_value("frames_repeated") not in (None, "0")
+                     and cam_status().message == "fault injected: fault_freeze", 10, "camera_sim diagnostics")
+    frozen_stamps = {round(s, 6) for s in stamps}
+    assert len({round(_t(m.header.stamp), 6) for m in est} & frozen_stamps) <= 2
+    t_thaw = set_param("fault_freeze", False)
+    probe.spin_until(lambda: after(est, t_thaw), 15, "odometry after the freeze")
+    trk.wait_for_log("tracking resumes", timeout=10)
+
+    # stopped: neither frames nor camera_info; two diagnostics a second apart with the same frame count
+    t_stop = set_param("fault_stopped", True)
+    probe.spin_until(lambda: cam_status().message == "fault injected: fault_stopped", 10, "stopped diagnostics")
+    n_stopped = cam_value("frames")
+    seen = len(diags)
+    probe.spin_until(lambda: len(diags) > seen and cam_status().message == "fault injected: fault_stopped"
+                     and any("camera simulator" in s.name for d in diags[seen:] for s in d.status), 10,
+                     "the next camera_sim diagnostics")
+    assert cam_value("frames") == n_stopped
+    assert not after(images, t_stop) and not after(infos, t_stop)
+    t_start = set_param("fault_stopped", False)
+    probe.spin_until(lambda: after(images, t_start) and after(infos, t_start), 15, "frames again")
+
+    # occlusion from now on (node-clock time): the tag is lost
+    n_lost = trk.log_text().count("tag lost")
+    set_param("occlusion_duration_s", 60.0)
+    set_param("occlusion_start_s", time.time())
+    probe.spin_until(lambda: trk.log_text().count("tag lost") > n_lost, 15, "the tag lost under the occluder")
+    set_param("occlusion_start_s", -1.0)
+
+    # drops: most frames lost, counted
+    set_param("drop_probability", 0.9)
+    d0 = int(cam_value("frames_dropped"))
+    probe.spin_until(lambda: int(cam_value("frames_dropped")) >= d0 + 5, 15, "dropped frames")
+    for p in (cam, trk):
+        assert p.stop() == 0
+
+
 def test_missing_files_and_devices_exit_2(launch, tmp_path):
     trk = launch("tracker_node", params={"tank_calibration_file": str(tmp_path / "nope.yaml")})
     assert trk.wait(60) == 2
