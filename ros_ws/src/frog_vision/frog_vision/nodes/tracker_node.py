@@ -257,13 +257,12 @@ class TrackerNode(Node):
                 self.dropped += int(round(gap / self.period)) - 1
         self.last_stamp = stamp
         self.frames += 1
-        before = self.state_name
         if self.frozen.check(msg.data):
             # the same picture again with a fresh stamp: a pose from it would be stale
             if self.state_name != "frozen":
                 self.get_logger().warn(f"camera frozen: {self.frozen.run} identical frames in a row (same bytes, "
                                        f"fresh stamps); no pose, odometry or tf from them until the frames change")
-                self.state_name, self._frozen_from, self._frozen_refused = "frozen", before, 0
+                self.state_name, self._frozen_from, self._frozen_refused = "frozen", self.state_name, 0
                 self.publish_diagnostics()
             self._frozen_refused += 1
             return
