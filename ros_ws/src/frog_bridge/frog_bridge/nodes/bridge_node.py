@@ -125,6 +125,7 @@ class BridgeNode(Node):
         self.was_stalled = False
         self._due_timer = None
         self.stop_reason: str | None = None             # latched by frog/stop
+        self._refusal_logged: dict[str, float] = {}     # refusal kind -> when last logged (steady) [s]
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
 
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -207,11 +208,14 @@ class BridgeNode(Node):
             self.get_logger().warn(f"refused: {what}: {problem}")
 
     def _refuse(self, key: str, reason: str, throttle: bool = False) -> None:
+        """Count a refusal and log it; ``throttle``: at most every 5 s per kind (``key``), so a stream of
+        refusals is not logged each time but a refusal of another kind is logged at once."""
         self.scheduler.count_refusal(key)
-        if throttle:
-            self.get_logger().warn(f"refused: {reason}", throttle_duration_sec=5.0)
-        else:
-            self.get_logger().warn(f"refused: {reason}")
+        now = time.monotonic()
+        if throttle and now - self._refusal_logged.get(key, -math.inf) < 5.0:
+            return
+        self._refusal_logged[key] = now
+        self.get_logger().warn(f"refused: {reason}")
 
     def _link_allows(self, what: str) -> bool:
         if self.stop_reason is not None:
