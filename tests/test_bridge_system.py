@@ -503,9 +503,10 @@ def test_watchdog_cancels_the_pending_rear_when_the_planner_goes_silent(launch, 
     # I arms it too (any primitive); the silence after it trips with nothing to cancel
     publish_primitive(probe, pub, "I")
     bridge.wait_for_log(r"no primitive for 0\.\d+ s \(planner lost\?\): 0 pending pulse\(s\) cancelled", timeout=10)
-    # B: front now, rear 0.5 s later; the watchdog trips first and cancels the rear
+    # B: front now, rear 0.5 s later; the watchdog trips first and cancels the rear. Unstamped (= now):
+    # on a loaded machine a late delivery must not turn this into a refusal of a stale command
     t_b = time.time()
-    publish_primitive(probe, pub, "B")
+    pub.publish(Primitive(id=NAMES.index("B"), name="B"))
     bridge.wait_for_log(r"primitives again after \d+\.\d+ s without: watchdog cleared", timeout=10)
     bridge.wait_for_log(r"(?s)watchdog cleared.*no primitive for 0\.\d+ s \(planner lost\?\): 1 pending "
                         r"pulse\(s\) cancelled", timeout=10)
@@ -528,7 +529,7 @@ def test_watchdog_cancels_the_pending_rear_when_the_planner_goes_silent(launch, 
     assert not set_timeout(0.0).successful
     assert set_timeout(5.0).successful
     t_fresh = time.time()
-    publish_primitive(probe, pub, "B")
+    pub.publish(Primitive(id=NAMES.index("B"), name="B"))
     probe.spin_until(lambda: len(h_lines(read_log(log), after=t_fresh)) >= 2, 10, "front and rear of the fresh B")
     assert [line for _, line in h_lines(read_log(log), after=t_fresh)] == ["h 1 0", "h 2 3"]
     probe.spin_until(lambda: diag.values.get("watchdog") == "ok" and diag.level == 0, 10, "diagnostics: ok again")

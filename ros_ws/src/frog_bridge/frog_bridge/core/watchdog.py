@@ -5,11 +5,11 @@ longer than a few periods means it died, hangs or lost its link. The bridge then
 every pulse still pending (a rear pair of the last primitive, due one pulse after its front)
 and reports it; a fresh primitive afterwards is accepted normally, since it is fresh.
 
-The watchdog measures the age of the newest primitive: by its header stamp when it has one
-(a delayed or replayed old primitive does not feed it), by its arrival otherwise; a stamp
-in the future counts as now. Times are seconds on one clock chosen by the caller (the
-node's clock: simulated time in the twin, so a stalled simulation does not trip it); when
-that clock goes back (a restarted simulator), the count starts over.
+The watchdog measures the time since the last primitive arrived (whether a primitive is
+too old to execute is the scheduler's check, ``max_command_age_s``). Times are seconds on
+one clock chosen by the caller (the node's clock: simulated time in the twin, so a stalled
+simulation does not trip it); when that clock goes back (a restarted simulator), the count
+starts over.
 """
 
 from __future__ import annotations
@@ -54,21 +54,14 @@ class PrimitiveWatchdog:
             raise ValueError(f"primitive timeout {value!r} s must be a finite time > 0")
         self._timeout_s = float(value)
 
-    def fed(self, now: float, stamp: float | None = None) -> bool:
-        """A primitive arrived at ``now``, chosen at ``stamp`` (None: unknown, take ``now``).
-
-        Returns True if it clears a tripped watchdog (the planner is back).
-        """
-        t = now if stamp is None else min(stamp, now)
-        if self.last is None or t > self.last or now < self.last:     # (the clock went back: start over)
-            self.last = t
-        if self.tripped and now - self.last <= self.timeout_s:
-            self.tripped = False
-            return True
-        return False
+    def fed(self, now: float) -> bool:
+        """A primitive arrived at ``now``; True if it clears a tripped watchdog (the planner is back)."""
+        self.last = now
+        was, self.tripped = self.tripped, False
+        return was
 
     def silence(self, now: float) -> float | None:
-        """Age of the newest primitive at ``now`` [s]; None before the first."""
+        """Time since the last primitive arrived, at ``now`` [s]; None before the first."""
         return None if self.last is None else now - self.last
 
     def check(self, now: float) -> bool:

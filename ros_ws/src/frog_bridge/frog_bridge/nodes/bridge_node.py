@@ -182,7 +182,7 @@ class BridgeNode(Node):
         if msg.name and msg.name.strip().upper() != name:
             self._refuse(REFUSED_INVALID, f"primitive id {msg.id} is {name!r} but the message names {msg.name!r}")
             return
-        self._feed_watchdog(_stamp_s(msg.header.stamp))
+        self._feed_watchdog()
         if not self._link_allows(f"primitive {name}"):
             return
         self._decided(self.scheduler.submit_primitive(msg.id, _stamp_s(msg.header.stamp), self._now()), t_in)
@@ -250,10 +250,10 @@ class BridgeNode(Node):
         self._write_due(t_in)
 
     # -- watchdog ------------------------------------------------------------------------
-    def _feed_watchdog(self, stamp: float | None) -> None:
+    def _feed_watchdog(self) -> None:
         now = self._now()
         silence = self.watchdog.silence(now)
-        if self.watchdog.fed(now, stamp):
+        if self.watchdog.fed(now):
             self.get_logger().info(f"primitives again after {silence:.2f} s without: watchdog cleared")
             self.publish_diagnostics()
 
