@@ -484,6 +484,100 @@ def test_frog_stop_cancels_the_pending_pulse_and_latches_until_cleared(launch, p
     assert bridge.stop() == 0 and emu.stop() == 0
 
 
+def test_watchdog_cancels_the_pending_rear_when_the_planner_goes_silent(launch, probe, tmp_path):
+    """No primitive for primitive_timeout_s: pending pulses cancelled, WARN logged once and in the diagnostics.
+    500 ms pulses and a 0.2 s timeout: B's rear pair is still pending when the watchdog trips."""
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    from soft_robot_interfaces.msg import Primitive
+    emu, bridge, log = start_pair(launch, probe, tmp_path,
+                                  bridge_params={"pulse_ms": 500, "max_duty_cycle": 0.5, "primitive_timeout_s": 0.2},
+                                  emulator_params={"imu_rate_hz": 0.0})
+    diag = Diag(probe)
+    pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
+    probe.wait_for_subscriber("/frog/primitive")
+    probe.spin_until(lambda: diag.values.get("watchdog") == "waiting", 10, "diagnostics: watchdog not armed yet")
+    assert diag.level == 0
+
+    # I arms it too (any primitive); the silence after it trips with nothing to cancel
+    publish_primitive(probe, pub, "I")
+    bridge.wait_for_log(r"no primitive for 0\.\d+ s \(planner lost\?\): 0 pending pulse\(s\) cancelled", timeout=10)
+    # B: front now, rear 0.5 s later; the watchdog trips first and cancels the rear. Unstamped (= now):
+    # on a loaded machine a late delivery must not turn this into a refusal of a stale command
+    t_b = time.time()
+    pub.publish(Primitive(id=NAMES.index("B"), name="B"))
+    bridge.wait_for_log(r"primitives again after \d+\.\d+ s without: watchdog cleared", timeout=10)
+    bridge.wait_for_log(r"(?s)watchdog cleared.*no primitive for 0\.\d+ s \(planner lost\?\): 1 pending "
+                        r"pulse\(s\) cancelled", timeout=10)
+    probe.spin_until(lambda: diag.values.get("cancelled_watchdog") == "1", 10, "diagnostics: 1 pulse cancelled")
+    assert diag.level == 1 and "no primitive for" in diag.message and diag.values["watchdog"] == "tripped"
+    assert float(diag.values["primitive_age_s"]) > 0.2
+    # the bridge's clock passes the rear's due time and the stale bound (0.5 + 0.5 s): no rear line
+    probe.spin_until(lambda: diag.stamp > t_b + 1.2, 10, "diagnostics stamped after the rear's time")
+    assert [line for _, line in h_lines(read_log(log), after=t_b)] == ["h 1 0"]
+    assert bridge.log_text().count("planner lost?") == 2, "each silence is logged once"
+
+    # live: a longer timeout; a fresh primitive is executed normally, rear included
+    setter = probe.node.create_client(SetParameters, "/bridge_node/set_parameters")
+    probe.wait_for_service(setter)
+
+    def set_timeout(value):
+        p = ParameterMsg(name="primitive_timeout_s",
+                         value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value))
+        return probe.call(setter, SetParameters.Request(parameters=[p])).results[0]
+    assert not set_timeout(0.0).successful
+    assert set_timeout(5.0).successful
+    t_fresh = time.time()
+    pub.publish(Primitive(id=NAMES.index("B"), name="B"))
+    probe.spin_until(lambda: len(h_lines(read_log(log), after=t_fresh)) >= 2, 10, "front and rear of the fresh B")
+    assert [line for _, line in h_lines(read_log(log), after=t_fresh)] == ["h 1 0", "h 2 3"]
+    probe.spin_until(lambda: diag.values.get("watchdog") == "ok" and diag.level == 0, 10, "diagnostics: ok again")
+    assert emu.stop() == 0 and bridge.stop() == 0
+
+
+def test_emulator_fault_hooks_are_live_parameters(launch, probe, tmp_path):
+    """The twin's fault injector sets them with SetParameters: a BLE loss burst (loss_rate 1, then 0) and an
+    unplug whose duration was set while running."""
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    from soft_robot_interfaces.msg import LimbActivation, Primitive
+    emu, bridge, log = start_pair(launch, probe, tmp_path, bridge_params={"reconnect_period_s": 0.2,
+                                                                          "reconnect_max_period_s": 0.4},
+                                  emulator_params={"imu_rate_hz": 0.0})
+    fired = []
+    probe.node.create_subscription(LimbActivation, "/frog/limb_activation", fired.append, QOS)
+    pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
+    probe.wait_for_subscriber("/frog/primitive")
+    probe.wait_for_topic("/frog/limb_activation")
+    setter = probe.node.create_client(SetParameters, "/robot_emulator/set_parameters")
+    probe.wait_for_service(setter)
+
+    def set_double(name, value):
+        p = ParameterMsg(name=name, value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value))
+        return probe.call(setter, SetParameters.Request(parameters=[p])).results[0].successful
+
+    def results():
+        return [(line, r) for _, line, r in read_log(log) if line.startswith("h")]
+    assert set_double("loss_rate", 1.0)
+    publish_primitive(probe, pub, "G")                       # FL: lost over BLE
+    probe.spin_until(lambda: results(), 10, "the emulator to read G's line")
+    assert results() == [("h 0", "lost over BLE")]
+    assert set_double("loss_rate", 0.0)
+    publish_primitive(probe, pub, "H")                       # FR: fired
+    probe.spin_until(lambda: fired, 10, "H fired by the emulator")
+    assert results()[1][1].startswith("fire FR") and [list(m.limbs) for m in fired] == [[1]]
+
+    # unplug for a duration set while running; the bridge sees the loss and reconnects
+    assert set_double("unplug_duration_s", 0.3)
+    assert trigger(probe, "/robot_emulator/unplug").success
+    emu.wait_for_log(r"fault: unplugged, replug in 0\.3 s", timeout=5)
+    bridge.wait_for_log("serial link lost", timeout=10)
+    bridge.wait_for_log(r"link ready: sent 'p 80' \(reconnected", timeout=10)
+    assert emu.stop() == 0 and bridge.stop() == 0
+
+
 def test_parameters_described_and_a_device_that_appears_later(launch, probe, tmp_path):
     """ros2 param describe shows ranges; a port missing at start is retried until it appears."""
     from rcl_interfaces.msg import Parameter as ParameterMsg
@@ -522,7 +616,9 @@ def test_parameters_described_and_a_device_that_appears_later(launch, probe, tmp
     assert set_double("stall_duration_s", 0.5).successful
     bad = set_double("stall_duration_s", -1.0)
     assert not bad.successful and "range" in bad.reason
-    assert not set_double("loss_rate", 0.5).successful          # read-only
+    assert set_double("loss_rate", 0.5).successful              # live: BLE loss bursts (fault injection)
+    assert not set_double("loss_rate", 1.5).successful
+    assert not set_double("ble_latency_s", 0.1).successful      # read-only
     assert emu.stop() == 0 and bridge.stop() == 0
 
 

@@ -99,6 +99,49 @@ def test_sigkill_loses_at_most_the_last_second(launch, probe, tmp_path):
         _assert_content(msgs[seq][1], seq)
 
 
+def test_a_restart_after_sigkill_starts_the_next_file_and_leaves_the_first_unchanged(launch, probe, tmp_path):
+    """A recorder killed and started again with the same output_dir and file_prefix (as a supervisor does):
+    crash_000.mcap stays byte for byte as the kill left it (recoverable), crash_001.mcap holds what came after."""
+    import hashlib
+    from diagnostic_msgs.msg import DiagnosticArray
+    out = tmp_path / "rec"
+    params = {"output_dir": str(out), "file_prefix": "crash", "topics": ["/odom"], "flush_period_s": 0.2}
+    diags = []
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 50)
+
+    def recorded(file_name):
+        """Messages the recorder writing ``file_name`` reports (its diagnostics), 0 before any."""
+        counts = [int(v["messages"]) for d in diags for s in d.status if s.name == "recorder: recording"
+                  for v in [{kv.key: kv.value for kv in s.values}] if v["file"].endswith(file_name)]
+        return counts[-1] if counts else 0
+
+    rec = launch("recorder", params=params, name="recorder_first")
+    probe.wait_for_node("/recorder", timeout=20)
+    pub = launch("odom_publisher.py", "--rate", "200", "--count", "0")
+    pub.wait_for_log("publishing", timeout=30)
+    probe.spin_until(lambda: recorded("crash_000.mcap") >= 200, 30, "200 messages in the first file")
+    rec.send(9)                                      # SIGKILL: the file is left unfinished
+    assert rec.wait(10) == -9
+    first = out / "crash_000.mcap"
+    digest = hashlib.sha256(first.read_bytes()).hexdigest()
+
+    again = launch("recorder", params=params, name="recorder_again")
+    again.wait_for_log(r"to \S*crash_001\.mcap \(after 1 earlier file\(s\) of this prefix, left untouched", timeout=30)
+    probe.spin_until(lambda: recorded("crash_001.mcap") >= 200, 30, "200 messages in the second file")
+    pub.stop()
+    assert again.stop() == 0 and again.stopped_cleanly
+
+    assert sorted(f.name for f in out.glob("*.mcap")) == ["crash_000.mcap", "crash_001.mcap"]
+    assert hashlib.sha256(first.read_bytes()).hexdigest() == digest, "the first file was changed"
+    n, clean = recover(first, tmp_path / "first_recovered.mcap")
+    before = [int(d.pose.pose.position.x) for _, d in _decoded(tmp_path / "first_recovered.mcap")]
+    assert not clean and n == len(before) > 0 and before == list(range(len(before)))
+    assert summarize(out / "crash_001.mcap").complete
+    after = [int(d.pose.pose.position.x) for _, d in _decoded(out / "crash_001.mcap")]
+    assert len(after) >= 200 and after == list(range(after[0], after[0] + len(after)))
+    assert after[0] > before[-1], "the second file continues after the first (only the time it was down lost)"
+
+
 def test_split_by_duration_keeps_every_message_once(launch, probe, tmp_path):
     out = tmp_path / "rec"
     rec = launch("recorder", params={"output_dir": str(out), "file_prefix": "split",

@@ -155,3 +155,69 @@ def test_frog_stop_stops_deciding_at_once(launch, probe, library):
     assert prims and all(p.name == "I" for p in prims)
     assert status and all(s.state == PlannerStatus.STATE_IDLE for s in status)
     assert node.stop() == 0
+
+
+def _stamped_odom(x, y, yaw, age_s):
+    m = _odom(x, y, yaw)
+    t = time.time() - age_s
+    m.header.stamp.sec, m.header.stamp.nanosec = int(t), int((t % 1) * 1e9)
+    return m
+
+
+def test_odometry_with_an_old_stamp_blocks_decisions_and_is_counted(launch, probe, library):
+    """A tracker republishing old poses (fresh arrivals, old stamps): primitive I with the stamp's age in
+    the status and a count in the diagnostics; fresh stamps decide again, with the pose's age in the status."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from soft_robot_interfaces.msg import PlannerStatus, Primitive
+    node = launch("planner_node", params={"library_file": str(library), "period": 0.5, "stale_periods": 2.0,
+                                          "path_type": "line", "odom_topic": "/test/odom"})
+    prims, status, diags = [], [], []
+    probe.node.create_subscription(Primitive, "/frog/primitive", prims.append, QOS)
+    probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
+    odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
+    node.wait_for_log("following a line path", timeout=60)
+    probe.wait_for_subscriber("/test/odom", timeout=20)
+
+    def feed_until(make, predicate, timeout, what):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            odom_pub.publish(make())
+            probe.spin_for(0.05)
+            if predicate():
+                return
+        raise TimeoutError(f"{what} not reached within {timeout} s")
+
+    def stale_values():
+        return [int(kv.value) for d in diags for s in d.status if s.name == "planner_node: planner"
+                for kv in s.values if kv.key == "stale_decisions"]
+
+    # before any odometry: waiting, pose_age NaN, and the refusals are counted already
+    probe.spin_until(lambda: status and stale_values() and stale_values()[-1] >= 1, 10, "a counted refusal")
+    assert status[-1].state == PlannerStatus.STATE_WAITING and math.isnan(status[-1].pose_age)
+
+    # stamped 3 s ago (bound 2 x 0.5 s = 1 s), delivered now: refused, the age in the message and field
+    feed_until(lambda: _stamped_odom(0.05, 0.03, 0.0, 3.0),
+               lambda: any("its stamp is" in s.message for s in status), 10, "a stale-stamp status")
+    prims.clear()
+    status.clear()
+    n_before = stale_values()[-1]
+    feed_until(lambda: _stamped_odom(0.05, 0.03, 0.0, 3.0), lambda: len(status) >= 3, 10, "3 statuses")
+    assert all(s.state == PlannerStatus.STATE_WAITING and "its stamp is" in s.message for s in status), \
+        [s.message for s in status]
+    assert all(2.9 < s.pose_age < 4.0 for s in status), [s.pose_age for s in status]
+    assert prims and all(p.id == Primitive.ID_I for p in prims)
+    node.wait_for_log(r"odometry is stale: its stamp is 3\.\d+ s old .*; publishing primitive I", timeout=5)
+    assert node.log_text().count("its stamp is") == 1, "the reason is logged once, not every period"
+    probe.spin_until(lambda: stale_values()[-1] >= n_before + 3, 10, "the diagnostics' count to grow")
+
+    # a stamp far in the future (another clock): refused too
+    feed_until(lambda: _stamped_odom(0.05, 0.03, 0.0, -100.0),
+               lambda: any("in the future" in s.message for s in status), 10, "a future-stamp status")
+
+    # fresh stamps: decisions again, each with the age of its pose (small, non-negative)
+    feed_until(lambda: _stamped_odom(0.05, 0.03, 0.0, 0.0),
+               lambda: any(s.state == PlannerStatus.STATE_FOLLOWING for s in status), 10, "a decision")
+    decided = [s for s in status if s.state == PlannerStatus.STATE_FOLLOWING]
+    assert all(0.0 <= s.pose_age < 1.0 for s in decided), [s.pose_age for s in decided]
+    assert node.stop() == 0

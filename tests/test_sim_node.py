@@ -99,3 +99,53 @@ def test_true_pose_on_tf(launch, probe):
     assert t.transform.translation.x == pytest.approx(0.3, abs=1e-3)
     assert _yaw(t.transform.rotation) == pytest.approx(1.0, abs=1e-3)
     assert sim.stop() == 0
+
+
+def test_paused_stalls_the_simulation_and_clock_then_continues(launch, probe):
+    """paused (the fault injector's clock stall): no /clock, odometry or simulation while true; afterwards the
+    time continues from where it stopped (no jump to catch up)."""
+    import time
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    from rosgraph_msgs.msg import Clock
+    sim = launch("sim_node", params={"publish_clock": True, "gait_frequency_hz": 1.0})
+    clock, odom, diags = [], [], []
+    probe.node.create_subscription(Clock, "/clock", lambda m: clock.append((time.monotonic(), _t(m.clock))), 10)
+    probe.node.create_subscription(Odometry, "/frog/sim/odom", odom.append, QOS)
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
+    setter = probe.node.create_client(SetParameters, "/sim_node/set_parameters")
+    probe.wait_for_service(setter, timeout=120)
+
+    def set_paused(value):
+        p = ParameterMsg(name="paused", value=ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value))
+        assert probe.call(setter, SetParameters.Request(parameters=[p])).results[0].successful
+
+    def sim_status():
+        return [{kv.key: kv.value for kv in s.values} | {"message": s.message, "level": ord(s.level)}
+                for d in diags for s in d.status if "simulation" in s.name]
+    probe.spin_until(lambda: clock and odom and clock[-1][1] > 1.0, 120, "1 s of simulated time and odometry")
+    set_paused(True)
+    paused_at = float(sim.wait_for_log(r"paused at simulated time (\d+\.\d+) s", timeout=10).group(1))
+    # two diagnostics (a wall second apart) both paused, with the same simulated time and step count
+    seen = len(sim_status())
+    probe.spin_until(lambda: len([s for s in sim_status()[seen:] if s["paused"] == "true"]) >= 2, 10,
+                     "two paused diagnostics")
+    a, b = [s for s in sim_status()[seen:] if s["paused"] == "true"][:2]
+    assert a["sim_time_s"] == b["sim_time_s"] and a["steps"] == b["steps"] and b["level"] == 1
+    assert "paused" in b["message"]
+    assert max(t for _, t in clock) <= paused_at + 1e-6, "the clock advanced while paused"
+    n_odom = len(odom)
+    assert max(_t(m.header.stamp) for m in odom) <= paused_at + 1e-6
+    set_paused(False)
+    t_resume = time.monotonic()
+    probe.spin_until(lambda: clock[-1][1] > paused_at + 0.5, 20, "the clock to run again")
+    first = min(t for w, t in clock if w > t_resume)
+    assert paused_at < first < paused_at + 0.3, "resumed from the paused time, no jump"
+    assert len(odom) > n_odom and sim.running()
+    assert sim.stop() == 0
+
+
+def _t(stamp):
+    return stamp.sec + stamp.nanosec * 1e-9

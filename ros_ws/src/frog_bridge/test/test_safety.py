@@ -191,3 +191,43 @@ def test_link_state_machine_and_backoff():
     assert not link.clear_emergency()
     with pytest.raises(ValueError):
         LinkSupervisor(reconnect_period_s=2.0, reconnect_max_period_s=1.0)
+
+
+def test_watchdog_trips_once_after_the_silence_and_a_fresh_primitive_clears_it():
+    from frog_bridge.core.watchdog import PrimitiveWatchdog
+    w = PrimitiveWatchdog(3.0)
+    assert not w.check(100.0) and w.silence(100.0) is None           # not armed before the first primitive
+    assert not w.fed(100.0)
+    assert w.silence(100.5) == pytest.approx(0.5)
+    assert [w.check(t) for t in (101.0, 102.99, 103.01, 103.5, 200.0)] == [False, False, True, False, False]
+    assert w.tripped and w.trips == 1
+    assert w.fed(200.1) and not w.tripped                            # the next primitive clears it
+    assert not w.fed(200.2)
+    assert not w.check(203.1) and w.check(203.3) and w.trips == 2
+    assert w.fed(203.4)
+    assert not w.check(6.0) and not w.check(8.9) and w.check(9.1)    # clock back (new simulator): start over
+    w.timeout_s = 0.5
+    assert w.fed(9.2) and not w.check(9.7) and w.check(9.8)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="timeout"):
+            PrimitiveWatchdog(bad)
+
+
+def test_watchdog_cancels_the_pending_rear_pulse_on_a_fake_clock():
+    """The node's use: a primitive, then silence; at the rear pulse's due time the watchdog is checked
+    first, cancels the rear through the scheduler, and a fresh primitive afterwards fires normally."""
+    from frog_bridge.core.schedule import CANCELLED_WATCHDOG
+    from frog_bridge.core.watchdog import PrimitiveWatchdog
+    s = CommandScheduler(LimbGuard(ProtectionConfig(0.0, 1.0, 10.0)), 0.5, 0.5)   # 500 ms pulses
+    w = PrimitiveWatchdog(0.2)
+    s.submit_primitive(B, 10.0, 10.0)
+    w.fed(10.0)
+    assert run(s, 10.0) == [(10.0, (1, 0))]
+    written = []
+    for now in np.arange(10.05, 11.0, 0.05):                         # the node's timers
+        if w.check(now):
+            assert [p.label for p in s.cancel_all(CANCELLED_WATCHDOG)] == ["B rear"]
+        written += run(s, now)
+    assert written == [] and s.counts[CANCELLED_WATCHDOG] == 1 and w.tripped
+    assert s.submit_primitive(B, 11.0, 11.0).accepted and w.fed(11.0)
+    assert run(s, 11.0) + run(s, 11.5) == [(11.0, (1, 0)), (11.5, (2, 3))]

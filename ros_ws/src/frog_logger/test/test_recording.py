@@ -1,4 +1,4 @@
-"""Recording: split files, refuse overwrite, write errors, recovery of truncated files."""
+"""Recording: split files, never overwrite (a restart continues the numbering), write errors, recovery."""
 
 import errno
 
@@ -51,11 +51,26 @@ def test_split_by_duration(tmp_path):
     assert len(rec.files) == 5
 
 
-def test_refuses_to_overwrite(tmp_path):
+def test_a_restart_continues_after_the_existing_files_and_never_touches_them(tmp_path):
     (tmp_path / "r_000.mcap").write_bytes(b"precious")
-    with pytest.raises(RecordingError, match="refusing to overwrite"):
-        Recording(tmp_path, "r")
-    assert (tmp_path / "r_000.mcap").read_bytes() == b"precious"
+    (tmp_path / "r_002.mcap").write_bytes(b"also precious")       # numbering continues after the highest
+    (tmp_path / "r_x.mcap").write_bytes(b"other")                   # not one of the recording's files
+    (tmp_path / "rr_007.mcap").write_bytes(b"another prefix")
+    rec = Recording(tmp_path, "r", max_file_bytes=2000, compression="none")
+    assert [p.name for p in rec.existing_files] == ["r_000.mcap", "r_002.mcap"]
+    assert rec.current_file.name == "r_003.mcap"
+    rec.add_topic("/a", "pkg/msg/X", DEF)
+    (tmp_path / "r_004.mcap").write_bytes(b"made meanwhile")         # by another process: skipped, not truncated
+    for i in range(100):
+        rec.write("/a", _payload(i), i)
+        if i % 10 == 0:
+            rec.flush()                     # a closed chunk counts in the file size
+    rec.close()
+    assert [p.name for p in rec.files][:2] == ["r_003.mcap", "r_005.mcap"] and len(rec.files) > 2
+    assert [m[2] for f in rec.files for m in _messages(f)] == [_payload(i) for i in range(100)]
+    for name, data in (("r_000.mcap", b"precious"), ("r_002.mcap", b"also precious"), ("r_x.mcap", b"other"),
+                       ("rr_007.mcap", b"another prefix"), ("r_004.mcap", b"made meanwhile")):
+        assert (tmp_path / name).read_bytes() == data
 
 
 def test_unusable_folders(tmp_path):

@@ -34,6 +34,7 @@ CANCELLED_OVERLAP = "overlap_cancelled"
 CANCELLED_LINK = "link_lost_cancelled"
 CANCELLED_EMERGENCY = "emergency_cancelled"
 CANCELLED_SHUTDOWN = "shutdown_cancelled"
+CANCELLED_WATCHDOG = "watchdog_cancelled"     # no primitive for primitive_timeout_s (core.watchdog)
 
 
 @dataclass(frozen=True)
@@ -179,7 +180,7 @@ class CommandScheduler:
         self.guard.record(PlannedPulse(at, pulse.limbs, pulse.duration))
 
     def cancel_all(self, key: str) -> list[TimedPulse]:
-        """Drop every pending pulse (link lost, emergency, shutdown); count under ``key``."""
+        """Drop every pending pulse (link lost, emergency, stop, watchdog, shutdown); count under ``key``."""
         dropped, self.pending = self.pending, []
         self.counts[key] += len(dropped)
         return dropped

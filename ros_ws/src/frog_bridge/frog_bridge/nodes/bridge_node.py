@@ -8,8 +8,11 @@ stamped at the write), the robot's orientation on ``frog/imu`` (sensor_msgs/Imu)
 link's health on ``diagnostics``. An ``EMERGENCY`` line stops all actuation until
 ``~/clear_emergency`` (std_srvs/Trigger); so does a message on ``frog/stop``
 (std_msgs/Empty, the run's one stop: the planner stops deciding and the bridge cancels
-every pending pulse at once). The protocol, the limb protection and the link
-state machine are in :mod:`frog_bridge.core`.
+every pending pulse at once). Its own watchdog: when no ``frog/primitive`` (I included) has
+come for ``primitive_timeout_s`` of node-clock time (simulated time in the twin) after one
+had, every pending pulse is cancelled, a warning is logged once and the diagnostics say WARN
+until a fresh primitive arrives, which is executed normally. The protocol, the limb
+protection, the watchdog and the link state machine are in :mod:`frog_bridge.core`.
 """
 
 from __future__ import annotations
@@ -37,9 +40,10 @@ from frog_bridge.core.protocol import (
     QUATERNION_ORDERS, DecodeError, Emergency, LineFramer, Quaternion, RelayText, decode_relay_line,
     encode_heat, encode_set_pulse, excerpt)
 from frog_bridge.core.schedule import (
-    CANCELLED_EMERGENCY, CANCELLED_LINK, CANCELLED_SHUTDOWN, REFUSED_EMERGENCY, REFUSED_INVALID, REFUSED_LINK,
-    REFUSED_STALLED, CommandScheduler)
+    CANCELLED_EMERGENCY, CANCELLED_LINK, CANCELLED_SHUTDOWN, CANCELLED_WATCHDOG, REFUSED_EMERGENCY, REFUSED_INVALID,
+    REFUSED_LINK, REFUSED_STALLED, CommandScheduler)
 from frog_bridge.core.serial_link import SerialLink
+from frog_bridge.core.watchdog import PrimitiveWatchdog
 
 PARAMS = [
     Param("port", "/dev/ttyACM0", "serial device of the nRF52 relay (a pty link for the emulator)"),
@@ -71,6 +75,9 @@ PARAMS = [
     Param("orientation_variance", 0.0, "variance of each orientation angle [rad^2] for the Imu covariance; "
           "0 = unknown (all zeros, per sensor_msgs/Imu)", min=0.0, max=10.0),
     Param("diagnostics_period_s", 1.0, "period of diagnostics [s]", min=0.1, max=60.0),
+    Param("primitive_timeout_s", 3.0, "watchdog: no frog/primitive (I included) for this long after one had "
+          "arrived cancels every pending pulse (the planner is lost); a fresh primitive is executed normally "
+          "[s, node clock]", min=0.1, max=3600.0, live=True),
 ]
 
 
@@ -97,7 +104,7 @@ class BridgeNode(Node):
     def __init__(self, **kwargs):
         super().__init__("bridge_node", **kwargs)
         self.gate = MessageGate(self)     # non-finite, unstamped or oversized inputs
-        p = declare_parameters(self, PARAMS, validate=_validate)
+        p = declare_parameters(self, PARAMS, validate=_validate, on_change=self._on_parameters)
         self.cfg = p
         from soft_robot_interfaces.msg import LimbActivation, Primitive
         self._LimbActivation = LimbActivation
@@ -108,6 +115,7 @@ class BridgeNode(Node):
                 self.pulse_s, p["max_command_age_s"])
             self.supervisor = LinkSupervisor(p["reconnect_period_s"], p["reconnect_max_period_s"],
                                              p["settle_s"], p["stall_timeout_s"])
+            self.watchdog = PrimitiveWatchdog(p["primitive_timeout_s"])
         except ValueError as exc:
             raise ConfigurationError(str(exc)) from exc
         self.framer = LineFramer(p["max_line_bytes"])
@@ -117,6 +125,7 @@ class BridgeNode(Node):
         self.was_stalled = False
         self._due_timer = None
         self.stop_reason: str | None = None             # latched by frog/stop
+        self._refusal_logged: dict[str, float] = {}     # refusal kind -> when last logged (steady) [s]
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
 
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -143,7 +152,13 @@ class BridgeNode(Node):
         self.get_logger().info(
             f"bridge to {p['port']} at {p['baud']} baud: pulse {p['pulse_ms']} ms, limb protection "
             f"{p['min_limb_interval_s']:g} s / {p['max_duty_cycle'] * 100:g} % of {p['duty_window_s']:g} s, "
-            f"commands older than {p['max_command_age_s']:g} s dropped")
+            f"commands older than {p['max_command_age_s']:g} s dropped, watchdog {p['primitive_timeout_s']:g} s "
+            f"without a primitive")
+
+    def _on_parameters(self, changed: dict) -> None:
+        if "primitive_timeout_s" in changed:
+            self.watchdog.timeout_s = changed["primitive_timeout_s"]
+            self._check_watchdog()
 
     # -- helpers -----------------------------------------------------------------------
     def _now(self) -> float:
@@ -167,6 +182,7 @@ class BridgeNode(Node):
         if msg.name and msg.name.strip().upper() != name:
             self._refuse(REFUSED_INVALID, f"primitive id {msg.id} is {name!r} but the message names {msg.name!r}")
             return
+        self._feed_watchdog()
         if not self._link_allows(f"primitive {name}"):
             return
         self._decided(self.scheduler.submit_primitive(msg.id, _stamp_s(msg.header.stamp), self._now()), t_in)
@@ -179,6 +195,7 @@ class BridgeNode(Node):
             self._refuse_input("limb command", problem)
             return
         limbs = list(msg.limbs)
+        self._check_watchdog()          # a silent planner's pulses go before this command is queued
         if not self._link_allows(f"limb command {limb_names(limbs)}"):
             return
         self._decided(self.scheduler.submit_limbs(limbs, _stamp_s(msg.header.stamp), self._now(),
@@ -191,11 +208,14 @@ class BridgeNode(Node):
             self.get_logger().warn(f"refused: {what}: {problem}")
 
     def _refuse(self, key: str, reason: str, throttle: bool = False) -> None:
+        """Count a refusal and log it; ``throttle``: at most every 5 s per kind (``key``), so a stream of
+        refusals is not logged each time but a refusal of another kind is logged at once."""
         self.scheduler.count_refusal(key)
-        if throttle:
-            self.get_logger().warn(f"refused: {reason}", throttle_duration_sec=5.0)
-        else:
-            self.get_logger().warn(f"refused: {reason}")
+        now = time.monotonic()
+        if throttle and now - self._refusal_logged.get(key, -math.inf) < 5.0:
+            return
+        self._refusal_logged[key] = now
+        self.get_logger().warn(f"refused: {reason}")
 
     def _link_allows(self, what: str) -> bool:
         if self.stop_reason is not None:
@@ -229,9 +249,31 @@ class BridgeNode(Node):
             self.get_logger().info(f"cancelled pending {c.label} pulse: a newer command heats the same limb")
         self._write_due(t_in)
 
+    # -- watchdog ------------------------------------------------------------------------
+    def _feed_watchdog(self) -> None:
+        now = self._now()
+        silence = self.watchdog.silence(now)
+        if self.watchdog.fed(now):
+            self.get_logger().info(f"primitives again after {silence:.2f} s without: watchdog cleared")
+            self.publish_diagnostics()
+
+    def _check_watchdog(self) -> None:
+        """Trip the watchdog if the planner has been silent too long: cancel every pending pulse."""
+        if self.get_clock().now().nanoseconds == 0:        # no /clock yet
+            return
+        now = self._now()
+        if not self.watchdog.check(now):
+            return
+        n = len(self.scheduler.cancel_all(CANCELLED_WATCHDOG))
+        self._arm_due_timer()
+        self.get_logger().warn(f"no primitive for {self.watchdog.silence(now):.2f} s (planner lost?): {n} pending "
+                               f"pulse(s) cancelled; a fresh primitive is executed normally")
+        self.publish_diagnostics()
+
     # -- writing -------------------------------------------------------------------------
     def _write_due(self, t_in: float | None = None) -> None:
         t_in = time.perf_counter() if t_in is None else t_in
+        self._check_watchdog()              # before any pulse: is the planner still there?
         to_write, stale = self.scheduler.pop_due(self._now())
         for p in stale:
             self.get_logger().warn(f"dropped {p.label} pulse: not written within max_command_age_s of its time")
@@ -359,6 +401,7 @@ class BridgeNode(Node):
 
     # -- supervision -----------------------------------------------------------------------
     def supervise(self) -> None:
+        self._check_watchdog()
         now = time.monotonic()
         with self.link.lock:
             settled = self.supervisor.settled(now)
@@ -404,6 +447,10 @@ class BridgeNode(Node):
                 "ready but stalled: no line received yet"
         else:
             level, message = DiagnosticStatus.OK, "ready"
+        silence = self.watchdog.silence(self._now())
+        if self.watchdog.tripped and level == DiagnosticStatus.OK:
+            level, message = DiagnosticStatus.WARN, (f"ready, but no primitive for {silence:.1f} s (planner lost?): "
+                                                     f"pending pulses cancelled")
         lat = list(self.write_latency_ms)
         values = {
             "state": state.value, "port": self.cfg["port"], "stalled": str(stalled).lower(),
@@ -412,6 +459,9 @@ class BridgeNode(Node):
             "write_latency_ms_median": f"{statistics.median(lat):.3f}" if lat else "nan",
             "write_latency_ms_max": f"{max(lat):.3f}" if lat else "nan",
             "emergency": emergency,
+            "primitive_age_s": "nan" if silence is None else f"{silence:.3f}",
+            "watchdog": "tripped" if self.watchdog.tripped else "ok" if silence is not None else "waiting",
+            "watchdog_trips": str(self.watchdog.trips),
         }
         for k in ("lines_received", "lines_written", "imu_lines", "emergency_lines", "other_lines", "decode_errors"):
             values[k] = str(self.counts[k])

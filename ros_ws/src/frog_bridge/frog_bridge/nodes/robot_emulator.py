@@ -6,8 +6,9 @@ model (:mod:`frog_bridge.core.emulator`) and publishes what the robot fired on
 ``frog/limb_activation`` (LimbActivation, stamped on the node clock: simulated time when
 the graph runs on ``/clock``), which ``sim_node`` executes. It writes ``Central: Q w x y z``
 lines from the heading in ``frog/sim/odom`` at ``imu_rate_hz``, and injects faults on
-request: ``~/inject_emergency``, ``~/unplug`` (and ``~/replug``), ``~/inject_garbage``,
-``~/stall`` (std_srvs/Trigger).
+request: ``~/inject_emergency``, ``~/unplug`` (and ``~/replug``; back after the live
+``unplug_duration_s``, 0 = only on ``~/replug``), ``~/inject_garbage``, ``~/stall``
+(std_srvs/Trigger), and BLE loss bursts through the live ``loss_rate``.
 """
 
 from __future__ import annotations
@@ -48,7 +49,8 @@ PARAMS = [
           min=0.0, max=1.0),
     Param("ble_interval_s", DEFAULT_BLE_INTERVAL_S, "BLE connection interval: uniform extra delay in [0, it) [s]",
           min=0.0, max=1.0),
-    Param("loss_rate", 0.0, "probability that a line is lost over BLE", min=0.0, max=1.0),
+    Param("loss_rate", 0.0, "probability that a line is lost over BLE; live (a loss burst: set it, then back)",
+          min=0.0, max=1.0, live=True),
     Param("seed", -1, "random seed of the BLE model and garbage; -1 = random", min=-1),
     Param("initial_pulse_ms", 80, "firmware pulse length until a 'p' line arrives [ms]", min=1, max=1000),
     Param("imu_rate_hz", 20.0, "rate of 'Central: Q' lines [Hz]; 0 = none", min=0.0, max=500.0),
@@ -70,7 +72,7 @@ class RobotEmulator(Node):
     def __init__(self, **kwargs):
         super().__init__("robot_emulator", **kwargs)
         p = declare_parameters(self, [dataclasses.replace(r, default=namespaced_path(r.default, self.get_namespace()))
-                                      if r.name == "link_path" else r for r in PARAMS])
+                                      if r.name == "link_path" else r for r in PARAMS], on_change=self._on_parameters)
         self.cfg = p
         from soft_robot_interfaces.msg import LimbActivation
         self._LimbActivation = LimbActivation
@@ -144,10 +146,14 @@ class RobotEmulator(Node):
                                f"U(0, {p['ble_interval_s'] * 1e3:g}) ms, loss {p['loss_rate']:g}, IMU "
                                f"{p['imu_rate_hz']:g} Hz")
 
+    def _on_parameters(self, changed: dict) -> None:
+        if "loss_rate" in changed:          # read by the executor thread only (_deliver), as set here
+            self.ble.loss_rate = float(changed["loss_rate"])
+
     def _diagnostics(self):
         from soft_robot_common.diagnostics import OK, WARN
         values = dict(self.counts, device=self.device.device_path, dropped_bytes=self.device.dropped_bytes,
-                      heading_known=self.yaw is not None)
+                      heading_known=self.yaw is not None, loss_rate=self.ble.loss_rate)
         if not self.device.plugged:
             return WARN, "unplugged (fault injected): waiting for ~/replug or the replug timer", values
         if time.monotonic() < self.stalled_until:

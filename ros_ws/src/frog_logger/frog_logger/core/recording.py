@@ -1,6 +1,8 @@
 """MCAP recording of raw ROS 2 CDR messages: schemas, channels, splitting, crash safety.
 
 A :class:`Recording` owns a sequence of MCAP files ``<prefix>_<NNN>.mcap`` in one folder.
+Files already there are never touched: a recording restarted with the same folder and
+prefix (a recorder killed and started again) continues after the highest existing number.
 Messages arrive as serialised CDR bytes and are written without decoding. Chunks are
 closed at every :meth:`Recording.flush` (the node calls it about twice a second), so a
 process killed with SIGKILL leaves a file whose complete chunks survive; ``frog-log
@@ -12,6 +14,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import socket
 import time
 from dataclasses import dataclass, field
@@ -20,7 +23,7 @@ from typing import Callable, Optional
 
 from mcap.writer import CompressionType, Writer
 
-__all__ = ["Recording", "RecordingError", "TopicInfo", "check_output_folder"]
+__all__ = ["Recording", "RecordingError", "TopicInfo", "check_output_folder", "existing_files"]
 
 LIBRARY = "frog_logger"
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
@@ -63,6 +66,17 @@ def check_output_folder(folder: str | os.PathLike) -> Path:
     return path
 
 
+def _file_index(path: Path, prefix: str) -> int:
+    return int(path.name[len(prefix) + 1:-len(".mcap")])
+
+
+def existing_files(folder: str | os.PathLike, prefix: str) -> list[Path]:
+    """Files ``<prefix>_<NNN>.mcap`` in ``folder``, by their number."""
+    pattern = re.compile(re.escape(prefix) + r"_\d{3,}\.mcap")
+    found = [p for p in Path(folder).iterdir() if pattern.fullmatch(p.name)]
+    return sorted(found, key=lambda p: _file_index(p, prefix))
+
+
 def _describe_os_error(exc: OSError) -> str:
     if exc.errno == errno.ENOSPC:
         return "disk full (no space left on device)"
@@ -96,7 +110,10 @@ class Recording:
     Raises
     ------
     RecordingError
-        If the folder is unusable, a file already exists, or the arguments are invalid.
+        If the folder is unusable or the arguments are invalid.
+
+    Files ``<prefix>_<NNN>.mcap`` already in the folder (an earlier run, or the same
+    recorder before a restart) are left as they are: numbering continues after the highest.
     """
 
     def __init__(self, folder, prefix: str, max_file_bytes: int = 0,
@@ -120,6 +137,8 @@ class Recording:
         self._clock_ns = clock_ns
         self.topics: dict[str, TopicInfo] = {}
         self.files: list[Path] = []
+        self.existing_files = existing_files(self.folder, prefix)   # left untouched; numbering continues
+        self._next_index = _file_index(self.existing_files[-1], prefix) + 1 if self.existing_files else 0
         self.error: Optional[str] = None       # last write error, None while healthy
         self.dropped_messages = 0              # messages lost to write errors
         self.start_time_ns = clock_ns()
@@ -137,11 +156,18 @@ class Recording:
         return self.files[-1] if self._writer is not None else None
 
     def _open_next_file(self) -> None:
-        path = self.folder / f"{self.prefix}_{len(self.files):03d}.mcap"
-        if path.exists():
-            raise RecordingError(f"refusing to overwrite existing recording {str(path)!r}")
+        while True:
+            path = self.folder / f"{self.prefix}_{self._next_index:03d}.mcap"
+            self._next_index += 1
+            try:
+                stream = open(path, "xb")      # exclusive: never truncates a file, also one made meanwhile
+                break
+            except FileExistsError:
+                continue
+            except OSError as exc:
+                raise RecordingError(f"cannot start recording file {str(path)!r}: "
+                                     f"{_describe_os_error(exc)}") from exc
         try:
-            stream = open(path, "xb")
             writer = Writer(stream, compression=_COMPRESSION[self.compression],
                             chunk_size=4 * 1024 * 1024)
             writer.start(profile="ros2", library=LIBRARY)
@@ -154,10 +180,12 @@ class Recording:
                 "file_start_time_ns": str(now),
                 "host": socket.gethostname(),
                 "split_index": str(len(self.files)),
+                "file_index": str(self._next_index - 1),
                 "units": "log_time and publish_time in ns since the Unix epoch",
             })
             stream.flush()
         except OSError as exc:
+            stream.close()
             raise RecordingError(f"cannot start recording file {str(path)!r}: "
                                  f"{_describe_os_error(exc)}") from exc
         self.files.append(path)

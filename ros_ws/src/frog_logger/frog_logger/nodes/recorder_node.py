@@ -3,6 +3,8 @@
 Subscribes to the topics given in ``topics`` (or to every visible topic, re-discovered
 while running) with ``raw=True`` so messages are written without deserialising, matches
 each topic's publishers' QoS, and hands the bytes to :class:`frog_logger.core.Recording`.
+Existing files are never overwritten or truncated: restarted with the same ``output_dir``
+and ``file_prefix`` (after a crash, by a supervisor), it starts the next numbered file.
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ _PARAMS = [
     Param("exclude_regex", "", "topics matching this regular expression are not recorded (all-topics mode)"),
     Param("include_hidden", False, "also record hidden topics (a name part starting with '_')"),
     Param("output_dir", "recordings", "folder for the MCAP files (created if missing)"),
-    Param("file_prefix", "", "file name prefix; files are <prefix>_000.mcap, ... (empty: rec_<date>_<time>)"),
+    Param("file_prefix", "", "file name prefix; files are <prefix>_000.mcap, ... (empty: rec_<date>_<time>); a "
+          "restart with the same folder and prefix continues after the highest existing number"),
     Param("max_file_size_mb", 0.0, "start a new file past this size [MB = 1e6 bytes]; 0 = no size split",
           min=0.0, max=1e7),
     Param("max_file_duration_s", 0.0, "start a new file after this duration [s]; 0 = no time split", min=0.0,
@@ -149,9 +152,12 @@ class RecorderNode(Node):
         self.create_timer(p["discovery_period_s"], self.discover)
         self.create_timer(p["flush_period_s"], self.flush)
         self.create_timer(1.0, self.publish_diagnostics)
+        earlier = self.recording.existing_files
         self.get_logger().info(
             f"recording {'topics ' + ', '.join(self.topics) if self.topics else 'all topics'} "
-            f"to {self.recording.current_file}")
+            f"to {self.recording.current_file}"
+            + (f" (after {len(earlier)} earlier file(s) of this prefix, left untouched: {earlier[-1].name} ...)"
+               if earlier else ""))
         self.discover()
 
     # -- discovery ---------------------------------------------------------------------

@@ -7,8 +7,12 @@ pose in the world frame, twist in the body frame per REP-105), asks
 (relative names: ``__ns`` moves them). The reference path is latched on ``frog/path``. It
 publishes primitive I (no action), says why in the status and logs it when the state
 changes: stopped (``~/stop``, or ``frog/stop``, std_msgs/Empty, the run's one stop that
-also reaches the bridge), goal reached, odometry missing or older than
-``stale_periods`` periods, or a library that cannot be used. Weights, depth, look-aheads,
+also reaches the bridge), goal reached, odometry missing or stale, or a library that cannot
+be used. Odometry is stale when it was received, or is stamped (``header.stamp``: a tracker
+republishing old poses, a delayed message), more than ``stale_periods`` periods ago; a stamp
+that far in the future (another clock) is refused too. Each status carries ``pose_age``, the
+age of the newest pose by its stamp (NaN before the first), and the diagnostics count the
+decisions refused for a stale or missing pose (``stale_decisions``). Weights, depth, look-aheads,
 the path and ``library_file`` can be changed while running (``ros2 param set``); setting
 ``library_file`` (to a new path, or again to the same one after fixing the file) loads it
 anew, so a missing or corrupt library is fixed without a restart.
@@ -17,12 +21,14 @@ anew, so a missing or corrupt library is fixed without a restart.
 from __future__ import annotations
 
 import math
+import re
 import sys
 
 from geometry_msgs.msg import Pose2D, PoseStamped
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rclpy.node import Node
+from rclpy.time import Time
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from soft_robot_common import (ConfigurationError, MessageGate, NodeDiagnostics, Param, declare_parameters,
                                params_from_dataclass, run_node)
@@ -42,7 +48,8 @@ _NODE_PARAMS = [
     Param("odom_topic", "frog/odom", "odometry input (tracker, or the simulator's ground truth); relative "
           "names resolve in the node's namespace"),
     Param("world_frame", "tank", "frame of the path and the status poses"),
-    Param("stale_periods", 2.0, "odometry older than this many periods is stale", min=0.1, max=100.0, live=True),
+    Param("stale_periods", 2.0, "odometry received, or stamped, longer ago than this many periods is stale: "
+          "primitive I until a fresh one arrives", min=0.1, max=100.0, live=True),
     Param("autostart", True, "start following at once (else wait for ~/start)"),
     Param("initial_progress", 0.0, "progress along the path to start from, in [0, 1] (a restarted planner "
           "resumes where it was)", min=0.0, max=1.0),
@@ -109,7 +116,9 @@ class PlannerNode(Node):
             self.planner.reset(p["initial_progress"])
         self.running = bool(p["autostart"])
         self.odom = None
-        self.odom_received = None
+        self.odom_received = None       # node-clock time the newest odometry arrived
+        self.odom_stamp = None          # its header stamp (rclpy Time, the node's clock type)
+        self.stale_decisions = 0        # decisions refused (primitive I) for a stale or missing pose
         self.goal_reached = False
         self._last_state = None
         self.publish_path()
@@ -196,6 +205,7 @@ class PlannerNode(Node):
             return
         self.odom = ((p.x, p.y, yaw_of(q)), (tw.linear.x, tw.linear.y, tw.angular.z))
         self.odom_received = self.get_clock().now()
+        self.odom_stamp = Time.from_msg(msg.header.stamp, clock_type=self.odom_received.clock_type)
 
     def on_start(self, request, response):
         if self.library_error:
@@ -231,10 +241,24 @@ class PlannerNode(Node):
             return S.STATE_GOAL_REACHED, "goal reached"
         if self.odom is None:
             return S.STATE_WAITING, f"no odometry on {self.resolve_topic_name(self.cfg['odom_topic'])} yet"
+        bound = self.cfg["stale_periods"] * self.settings.period
         age = (self.get_clock().now() - self.odom_received).nanoseconds * 1e-9
-        if age > self.cfg["stale_periods"] * self.settings.period:
+        if age > bound:
             return S.STATE_WAITING, f"odometry is stale ({age:.2f} s old)"
+        stamp_age = self.pose_age()
+        if stamp_age > bound:
+            return S.STATE_WAITING, (f"odometry is stale: its stamp is {stamp_age:.2f} s old (received "
+                                     f"{age:.2f} s ago; bound {bound:.2f} s)")
+        if stamp_age < -bound:
+            return S.STATE_WAITING, (f"odometry is stamped {-stamp_age:.2f} s in the future (do the tracker "
+                                     f"and the planner use the same clock? use_sim_time)")
         return None
+
+    def pose_age(self) -> float:
+        """Age of the newest pose by its header stamp, now - stamp [s]; NaN before the first."""
+        if self.odom_stamp is None:
+            return math.nan
+        return (self.get_clock().now() - self.odom_stamp).nanoseconds * 1e-9
 
     def _diagnostics(self):
         """(level, message, values): ERROR without a usable library, WARN while waiting."""
@@ -245,7 +269,8 @@ class PlannerNode(Node):
         message = f"following the {self.path.name} path" if blocked is None else blocked[1]
         values = {"library_file": self.cfg["library_file"], "path": self.path.name,
                   "progress": float(self.planner.progress) if self.planner is not None else 0.0,
-                  "odometry_topic": self.resolve_topic_name(self.cfg["odom_topic"])}
+                  "odometry_topic": self.resolve_topic_name(self.cfg["odom_topic"]),
+                  "stale_decisions": self.stale_decisions, "pose_age_s": self.pose_age()}
         return level, message, values
 
     def _publish(self, primitive_id: int, name: str, state: int, message: str, decision=None) -> None:
@@ -257,7 +282,8 @@ class PlannerNode(Node):
         nan = float("nan")
         status = self._Status(primitive_id=primitive_id, primitive_name=name, state=state, message=message,
                               total_cost=nan, cost_distance=nan, cost_heading=nan, cost_progress=nan,
-                              distance_to_path=nan, predicted_pose=Pose2D(x=nan, y=nan, theta=nan))
+                              distance_to_path=nan, predicted_pose=Pose2D(x=nan, y=nan, theta=nan),
+                              pose_age=self.pose_age())
         status.header.stamp, status.header.frame_id = stamp, self.cfg["world_frame"]
         if decision is not None:
             w = self.settings.weights
@@ -276,7 +302,9 @@ class PlannerNode(Node):
         self.status_pub.publish(status)
 
     def _log_state(self, state: int, message: str) -> None:
-        if (state, message) == self._last_state:
+        # once per state and reason: the ages in a reason ("stale (3.12 s old)") do not count
+        key = (state, re.sub(r"-?\d+(\.\d+)?", "#", message))
+        if key == self._last_state:
             return
         text = message if state == self._Status.STATE_FOLLOWING else message + "; publishing primitive I"
         # rclpy wants one severity per call site
@@ -286,7 +314,7 @@ class PlannerNode(Node):
             self.get_logger().warning(text)
         else:
             self.get_logger().info(text)
-        self._last_state = (state, message)
+        self._last_state = key
 
     def decide(self) -> None:
         S = self._Status
@@ -312,6 +340,8 @@ class PlannerNode(Node):
                 self._publish(d.primitive_id, d.name, S.STATE_FOLLOWING, "following", d)
                 return
         state, reason = blocked
+        if state == S.STATE_WAITING:             # only odometry problems wait
+            self.stale_decisions += 1           # a decision refused for a stale or missing pose
         self._log_state(state, reason)
         self._publish(8, "I", state, reason)
 

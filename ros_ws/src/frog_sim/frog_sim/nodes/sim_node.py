@@ -9,6 +9,8 @@ so ``__ns`` puts a second simulator beside the first.
 With ``publish_clock`` it also publishes ``/clock`` (simulated time, monotonic across
 ``~/reset``) and stamps everything with it, so other nodes can run with ``use_sim_time``
 faster than real time; otherwise stamps come from the node's ROS clock (system time).
+``paused`` (live; the fault injector's clock stall) stops the simulation, its messages and
+``/clock`` while true; it continues from the same time afterwards, without catching up.
 """
 
 from __future__ import annotations
@@ -65,6 +67,8 @@ _NODE_PARAMS = [
           "times a factor drawn from N(1, sd^2) per firing (real kicks vary from one to the next); 0 = none",
           min=0.0, max=0.5),
     Param("seed", 0, "random seed of the limb strengths and the kick variability", min=0, max=2**31 - 1),
+    Param("paused", False, "stop simulating and publishing (odometry, shape, /clock: a clock stall) while true; "
+          "continues from the same simulated time afterwards (live)", live=True),
     Param("duration_s", 0.0, "stop simulating (keep publishing the last state) after this simulated time "
           "[s]; 0 = run forever", min=0.0, max=1e7),
 ]
@@ -167,7 +171,13 @@ class SimNode(Node):
             f"; limb strengths " + ", ".join(f"{k} {v:.2f}" for k, v in self.sim.limb_strength.items()) + ")")
 
     def on_parameters(self, changed: dict) -> None:
-        if "real_time_factor" in changed:
+        if "paused" in changed:
+            if changed["paused"]:
+                self.get_logger().warn(f"paused at simulated time {self.world_time:.3f} s: no simulation, "
+                                       f"messages or /clock until paused is false")
+            else:
+                self.get_logger().info(f"resumed at simulated time {self.world_time:.3f} s")
+        if "real_time_factor" in changed or "paused" in changed:
             # re-anchor the pacing so the new rate applies from now on, without a jump (and the
             # diagnostics' real-time factors, which are measured since the anchor)
             self.wall_start, self.sim_start = time.monotonic(), self.sim.time
@@ -181,7 +191,7 @@ class SimNode(Node):
         return self.sim_start + (time.monotonic() - self.wall_start) * rtf
 
     def tick(self) -> None:
-        if self.error is not None:
+        if self.error is not None or self.cfg["paused"]:
             return
         end = self.cfg["duration_s"] or math.inf
         target = min(self._target_time(), end)
@@ -321,8 +331,10 @@ class SimNode(Node):
         sim_elapsed = self.sim.time - self.sim_start
         status = DiagnosticStatus(
             name=f"{self.get_name()}: simulation", hardware_id="frog_sim",
-            level=DiagnosticStatus.ERROR if self.error else DiagnosticStatus.OK,
-            message=self.error or "running")
+            level=DiagnosticStatus.ERROR if self.error else DiagnosticStatus.WARN if self.cfg["paused"] else
+            DiagnosticStatus.OK,
+            message=self.error or ("paused (a clock stall): set paused false to continue" if self.cfg["paused"]
+                                   else "running"))
         cost = self.step_wall_s / sim_elapsed if sim_elapsed > 0 else float("nan")
         status.values = [
             KeyValue(key="sim_time_s", value=f"{self.sim.time:.3f}"),
@@ -331,6 +343,7 @@ class SimNode(Node):
             KeyValue(key="compute_real_time_factor",
                      value=f"{1 / cost:.1f}" if cost > 0 else "nan"),
             KeyValue(key="steps", value=str(self.steps_total)),
+            KeyValue(key="paused", value=str(self.cfg["paused"]).lower()),
         ]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self._stamp()

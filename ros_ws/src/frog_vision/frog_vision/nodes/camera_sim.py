@@ -6,11 +6,18 @@ twist) and rod network (``frog/sim/shape``), and publishes rendered frames on
 simulated time with ``use_sim_time``), stamped with the capture time. The robot is drawn
 where the odometry says it is at that time (extrapolated with its twist from the last
 message), with the shape's outline carried rigidly from the shape's own time.
+
+Fault hooks (live parameters, set by the twin's fault injector with SetParameters):
+``fault_freeze`` publishes the last rendered frame again (the same bytes) with fresh stamps,
+as a hung driver does; ``fault_stopped`` publishes no frames and no camera_info;
+``drop_probability`` loses frames at random; ``occlusion_start_s`` / ``occlusion_duration_s``
+hide the robot under an occluder for a span of node-clock time.
 """
 from __future__ import annotations
 
 import bisect
 import collections
+import dataclasses
 import math
 import sys
 import time
@@ -46,11 +53,15 @@ PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
     Param("corner_jitter_px", AUTHORS_CORNER_JITTER_PX, "per-frame random tag displacement (vibration, "
           "ripples) [px]; the default gives the authors' measured pose noise, 0 = an ideal camera",
           min=0.0, max=5.0),
-    Param("drop_probability", 0.0, "chance that a frame is lost", min=0.0, max=0.99),
+    Param("drop_probability", 0.0, "chance that a frame is lost (live)", min=0.0, max=0.99, live=True),
     Param("seed", 0, "random seed (noise, drops, water texture)", min=0, max=2**31 - 1),
-    Param("occlusion_start_s", -1.0, "hide the robot under an occluder from this node-clock time [s]; < 0 = never",
-          min=-1.0, max=1e9),
-    Param("occlusion_duration_s", 1.0, "for this long [s]", min=0.0, max=1e6),
+    Param("occlusion_start_s", -1.0, "hide the robot under an occluder from this node-clock time [s]; < 0 = never "
+          "(live; on the system clock an epoch time)", min=-1.0, max=1e10, live=True),
+    Param("occlusion_duration_s", 1.0, "for this long [s] (live)", min=0.0, max=1e6, live=True),
+    Param("fault_freeze", False, "fault: publish the last rendered frame again (the same bytes) with fresh stamps, "
+          "like a hung camera driver (live)", live=True),
+    Param("fault_stopped", False, "fault: publish no frames and no camera_info, like a dead camera (live)",
+          live=True),
 ]
 
 
@@ -59,7 +70,7 @@ class CameraSimNode(Node):
 
     def __init__(self):
         super().__init__("camera_sim")
-        p = declare_parameters(self, PARAMS)
+        p = declare_parameters(self, PARAMS, on_change=self._on_parameters)
         self.cfg = p
         camera = load_camera(p["camera_info_file"]) or CameraModel.realsense_640x480()
         pose = load_camera_pose(p["tank_calibration_file"])
@@ -84,6 +95,9 @@ class CameraSimNode(Node):
         self.tag_offset = None
         self.frames = 0
         self.skipped = 0
+        self.dropped = 0                 # frames lost on purpose (drop_probability)
+        self.repeated = 0                # frames published again by fault_freeze
+        self.last_image = None           # the last rendered frame (fault_freeze repeats it)
         self._diag_refused = 0
         self.refused = 0                 # messages refused by the common rule (non-finite, unstamped)
         self.last_refusal = ""
@@ -100,6 +114,18 @@ class CameraSimNode(Node):
         self.create_timer(1.0, self.publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"rendering {camera.width}x{camera.height} at {p['fps']:g} fps "
                                f"(tag {p['tag_family']} id {p['tag_id']}, noise {p['noise_sigma']:g})")
+
+    def _on_parameters(self, changed: dict) -> None:
+        if "drop_probability" in changed:
+            self.renderer.settings = dataclasses.replace(self.renderer.settings,
+                                                         drop_probability=changed["drop_probability"])
+        for name, what in (("fault_freeze", "repeating the last frame with fresh stamps"),
+                           ("fault_stopped", "publishing no frames and no camera_info")):
+            if name in changed:
+                if changed[name]:
+                    self.get_logger().warn(f"fault injected: {name}: {what}")
+                else:
+                    self.get_logger().info(f"fault cleared: {name}")
 
     def _refuse(self, what: str, msg) -> bool:
         """Log and count ``msg`` if the common rule refuses it (True: refused)."""
@@ -170,8 +196,18 @@ class CameraSimNode(Node):
             self.next_capture += period
 
     def capture(self, t: float) -> None:
+        if self.cfg["fault_stopped"]:
+            return
         pose_now, twist = _interpolate(self.odom, t)
         if self.renderer.should_drop():
+            self.dropped += 1
+            return
+        if self.cfg["fault_freeze"] and self.last_image is not None:
+            stamp = s_to_stamp(t)
+            self.image_pub.publish(array_to_image(self.last_image, stamp, self.cfg["frame_id"]))
+            self.info_pub.publish(camera_info_msg(self.camera, stamp, self.cfg["frame_id"]))
+            self.frames += 1
+            self.repeated += 1
             return
         occ = []
         start = self.cfg["occlusion_start_s"]
@@ -183,6 +219,7 @@ class CameraSimNode(Node):
         img = self.renderer.render(pose_now, twist, self.shape, self.tag_offset, occ)
         self.render_s += time.perf_counter() - w0
         stamp = s_to_stamp(t)
+        self.last_image = img
         self.image_pub.publish(array_to_image(img, stamp, self.cfg["frame_id"]))
         self.info_pub.publish(camera_info_msg(self.camera, stamp, self.cfg["frame_id"]))
         self.frames += 1
@@ -197,7 +234,10 @@ class CameraSimNode(Node):
         recent_refusal = self.refused > self._diag_refused
         self._diag_refused = self.refused
         level = DiagnosticStatus.OK if self.odom and frames and not recent_refusal else DiagnosticStatus.WARN
-        if recent_refusal:
+        faults = [n for n in ("fault_stopped", "fault_freeze") if self.cfg[n]]
+        if faults:
+            level, text = DiagnosticStatus.WARN, "fault injected: " + ", ".join(faults)
+        elif recent_refusal:
             text = self.last_refusal
         elif not self.odom:
             text = "waiting for frog/sim/odom"
@@ -212,6 +252,8 @@ class CameraSimNode(Node):
                          KeyValue(key="cpu_ms_mean", value=f"{self.cpu_s / max(self.frames, 1) * 1e3:.2f}"),
                          KeyValue(key="render_ms_mean", value=f"{self.render_s / max(self.frames, 1) * 1e3:.2f}"),
                          KeyValue(key="frames_skipped", value=str(self.skipped)),
+                         KeyValue(key="frames_dropped", value=str(self.dropped)),
+                         KeyValue(key="frames_repeated", value=str(self.repeated)),
                          KeyValue(key="shape_received", value=str(self.shape is not None)),
                          KeyValue(key="messages_refused", value=str(self.refused))]
         msg = DiagnosticArray(status=[status])

@@ -4,9 +4,18 @@ Subscribes to ``camera/image_raw`` and ``camera/camera_info`` (or a ``camera_inf
 publishes ``frog/pose`` (PoseStamped) and ``frog/odom`` (Odometry: pose in ``tank``, body
 twist in ``frog``, covariances filled), stamped with the image's capture time; an
 annotated ``frog/tracker/debug_image`` when ``publish_debug_image``; and ``diagnostics``
-(detection rate, capture-to-publish latency, dropped frames, reprojection error). When the
-tag has been lost longer than ``coast_timeout`` nothing is published (no stale poses) and
-the diagnostics say so.
+(detection rate, capture-to-publish latency, dropped frames, reprojection error). While the
+tag is not seen, predictions are published for up to ``coast_timeout`` after the last
+measurement, stamped with each new frame's capture time; after that nothing is published (no
+stale poses) and the diagnostics say so.
+
+Frozen camera: a driver that hangs may repeat its last image with fresh stamps, while a real
+sensor (and camera_sim, whose frames carry noise) never delivers two byte-identical frames.
+From the ``frozen_frames``-th identical frame in a row (a CRC-32 of the bytes,
+:mod:`frog_vision.core.frame_check`) nothing is published from them (pose, odometry, tf),
+a warning is logged once and the diagnostics report ERROR "camera frozen"; tracking resumes
+with the first frame that differs. A frame whose stamp does not advance past the previous
+frame's is refused.
 
 Kick inputs: with ``kick_topic`` set (default ``frog/bridge/sent``, the bridge's record of
 every limb firing written to the robot, soft_robot_interfaces/LimbActivation stamped at the
@@ -33,6 +42,7 @@ from soft_robot_common import ConfigurationError, MessageGate, Param, declare_pa
 from soft_robot_interfaces.msg import LimbActivation
 
 from frog_vision.core.detection import DetectorSettings
+from frog_vision.core.frame_check import FrozenFrameDetector
 from frog_vision.core.pose import PoseSettings
 from frog_vision.core.state_filter import FilterSettings
 from frog_vision.core.tracker import Tracker
@@ -83,6 +93,8 @@ PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
           min=0.0, max=60.0),
     Param("publish_debug_image", False, "publish frog/tracker/debug_image (annotated frames)", live=True),
     Param("publish_tf", True, "publish the tracked pose on tf as world_frame -> body_frame"),
+    Param("frozen_frames", 3, "this many byte-identical frames in a row (the first included) mean a frozen camera: "
+          "nothing is published from them until the frames change", min=2, max=1000, live=True),
 ]
 
 
@@ -138,6 +150,8 @@ class TrackerNode(Node):
                 self.tf_pub = self.create_publisher(TFMessage, "tf", 100)
         self.window = collections.deque(maxlen=90)        # (detected, latency_s, compute_s, residual)
         self.frames = self.dropped = self.bad_frames = 0
+        self.frozen = FrozenFrameDetector(p["frozen_frames"])
+        self._frozen_from, self._frozen_refused = "", 0     # state before a freeze; frames refused in it
         self.last_stamp = None
         self.period = None
         self.state_name = "waiting for images"
@@ -168,6 +182,8 @@ class TrackerNode(Node):
 
     def _apply(self, changed: dict) -> None:
         self.cfg.update(changed)
+        if "frozen_frames" in changed:
+            self.frozen.frozen_frames = int(changed["frozen_frames"])
         self.filter_settings = self._filter_settings(self.cfg)
         if self.tracker is not None:
             self.tracker.filter.settings = self.filter_settings
@@ -241,6 +257,19 @@ class TrackerNode(Node):
                 self.dropped += int(round(gap / self.period)) - 1
         self.last_stamp = stamp
         self.frames += 1
+        if self.frozen.check(msg.data):
+            # the same picture again with a fresh stamp: a pose from it would be stale
+            if self.state_name != "frozen":
+                self.get_logger().warn(f"camera frozen: {self.frozen.run} identical frames in a row (same bytes, "
+                                       f"fresh stamps); no pose, odometry or tf from them until the frames change")
+                self.state_name, self._frozen_from, self._frozen_refused = "frozen", self.state_name, 0
+                self.publish_diagnostics()
+            self._frozen_refused += 1
+            return
+        if self.state_name == "frozen":
+            self.get_logger().info(f"camera frames change again after {self._frozen_refused} frozen frame(s): "
+                                   f"tracking resumes")
+            self.state_name = self._frozen_from
         self._logged_error = None                 # a good frame: log the next problem again
         res = self.tracker.process(img, stamp)
         before = self.state_name
@@ -312,6 +341,9 @@ class TrackerNode(Node):
             level, message = DiagnosticStatus.WARN, "tag not seen: coasting on the prediction"
         elif self.state_name == "lost":
             level, message = DiagnosticStatus.ERROR, "tag lost: odometry stopped"
+        elif self.state_name == "frozen":
+            level, message = DiagnosticStatus.ERROR, (f"camera frozen: {self.frozen.run} identical frames in a row; "
+                                                      f"odometry stopped")
         else:
             level, message = DiagnosticStatus.WARN, self.state_name
         status = DiagnosticStatus(name=f"{self.get_name()}: tag tracking", hardware_id="camera", level=level,
@@ -322,6 +354,8 @@ class TrackerNode(Node):
                          KeyValue(key="frames", value=str(self.frames)),
                          KeyValue(key="dropped_frames", value=str(self.dropped)),
                          KeyValue(key="bad_frames", value=str(self.bad_frames)),
+                         KeyValue(key="frozen", value=str(self.state_name == "frozen").lower()),
+                         KeyValue(key="frozen_frames_refused", value=str(self.frozen.frozen_total)),
                          KeyValue(key="reprojection_error_px", value=f"{np.median(res):.3f}" if res else "nan"),
                          KeyValue(key="last_error", value=self.last_error)]
         msg = DiagnosticArray(status=[status])
