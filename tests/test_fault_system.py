@@ -1,0 +1,99 @@
+"""Faults in the running twin (issue 22), the reduced campaign: one run per fault class.
+
+Each run is ``frog-twin --path ellipse --faults SPEC``: the nine real node processes on their
+own ROS domain, the faults injected while the frog follows the path. What is checked comes
+from outside the nodes under test: the twin's watch node saw every odometry message, decision
+and firing, and the recording is compared with what it saw.
+"""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from frog_twin.core.faults import FAULT_CLASSES, parse_faults
+
+pytestmark = pytest.mark.system
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def small_library(tmp_path_factory):
+    from frog_sim.core.motion_library import LibrarySpec, generate_library
+    path = tmp_path_factory.mktemp("lib") / "small.npz"
+    return generate_library(LibrarySpec(n_states=40, horizon=1.5, seed=7), path, workers=2,
+                            chunk_size=10, progress=False)
+
+
+def _run(small_library, tmp_path, spec, *extra):
+    out = tmp_path / "twin"
+    r = subprocess.run([sys.executable, "-m", "frog_twin.twin", "--library", str(small_library), "--path", "ellipse",
+                        "--duration", "90", "--seed", "3", "--faults", spec, "--out", str(out), *extra],
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stdout[-4000:] + r.stderr[-3000:]
+    (m,) = json.loads((out / "metrics.json").read_text())
+    return m, r.stdout, out
+
+
+@pytest.mark.parametrize("cls", ["camera", "link", "process", "time"])
+def test_recoverable_faults_complete_the_path_with_nothing_fired_on_stale_state(cls, small_library, tmp_path):
+    m, stdout, out = _run(small_library, tmp_path, FAULT_CLASSES[cls])
+    rep = m["faults"]
+    faults = parse_faults(FAULT_CLASSES[cls])
+    done = [what for _, what in rep["actions"]]
+    for f in faults:       # every fault was applied while the frog was on the path, none refused
+        assert any(w.startswith(f.label() + ":") for w in done), (f.label(), done)
+    assert not rep["injector_failures"], rep["injector_failures"]
+    assert rep["outcome"] == "completed", (rep["stop_reason"], stdout[-3000:])
+    assert rep["stale_firings"] == [], rep["stale_firings"][:5]
+    assert rep["n_firings"] >= 10
+    assert rep["recorder_lost"] == 0, rep["recorder"]
+    assert all(pf["recovery_s"] is not None and pf["recovery_s"] < 15 for pf in rep["per_fault"]), rep["per_fault"]
+    assert m["unclean_stops"] == [], m["unclean_stops"]
+    if cls == "process":
+        restarts = m["supervision"]["restarts"]
+        assert restarts["tracker_node"] == 1 and restarts["planner_node"] == 1 and restarts["recorder"] == 1 \
+            and restarts["camera_sim"] == 1, restarts
+        # the restarted recorder wrote a new file beside the first (recovered after its SIGKILL)
+        assert len(list((out / "ellipse" / "recording").glob("*.mcap"))) >= 2
+        assert list((out / "ellipse" / "recovered").glob("*.mcap")), "the killed recorder's file was not recovered"
+        assert "supervisor: planner_node restarted" in stdout
+
+
+def test_emergency_stops_the_run_cleanly_and_nothing_fires_after_it(small_library, tmp_path):
+    m, stdout, _ = _run(small_library, tmp_path, FAULT_CLASSES["emergency"])
+    rep = m["faults"]
+    assert rep["outcome"] == "stopped" and "emergency" in rep["stop_reason"], rep["stop_reason"]
+    t_emergency = [t for t, what in rep["actions"] if "EMERGENCY" in what][0]
+    # the robot fired nothing from 0.5 s after the EMERGENCY line (its BLE latency) to the end
+    assert rep["last_firing_s"] is None or rep["last_firing_s"] < t_emergency + 0.5, (rep["last_firing_s"],
+                                                                                     t_emergency)
+    assert rep["stale_firings"] == [] and rep["recorder_lost"] == 0
+    assert m["unclean_stops"] == []
+
+
+def test_a_dead_tracker_stops_the_run_cleanly_after_the_stuck_timeout(small_library, tmp_path):
+    m, stdout, _ = _run(small_library, tmp_path, FAULT_CLASSES["dead_node"], "--stuck-timeout", "8")
+    rep = m["faults"]
+    assert rep["outcome"] == "stopped", (rep["stop_reason"], stdout[-3000:])
+    assert "has not followed for 8 s" in rep["stop_reason"] and "stale" in rep["stop_reason"], rep["stop_reason"]
+    assert rep["stale_firings"] == [] and rep["recorder_lost"] == 0
+    assert m["supervision"]["restarts"]["tracker_node"] == 0
+    assert m["unclean_stops"] == []
+
+
+def test_the_stale_state_check_catches_a_planner_deciding_on_a_frozen_camera(small_library, tmp_path):
+    """The negative control: with the frozen-camera detection and the planner's stale bound both
+    switched off, the frog is kicked on an 8 s old picture, and the campaign's check says so."""
+    m, stdout, _ = _run(small_library, tmp_path, "camera_freeze@3+8",
+                        "--node-param", "tracker_node:frozen_frames=1000",
+                        "--node-param", "planner_node:stale_periods=100.0")
+    rep = m["faults"]
+    assert rep["outcome"] == "failed", rep["outcome"]
+    stale = rep["stale_firings"]
+    assert len(stale) >= 2, stale
+    assert all(s["pose_age"] > rep["pose_bound_s"] for s in stale)
+    assert "limb firings on state older than the bound: 0" not in stdout
