@@ -31,7 +31,7 @@ def _runs(args):
                 for cls, spec in FAULT_CLASSES.items() for path in paths for seed in seeds]
     faults = CAMPAIGN_FAULTS if args.campaign_faults is None else \
         [s.strip() for s in args.campaign_faults.split(";") if s.strip()]
-    moments = CAMPAIGN_MOMENTS[:args.moments]
+    moments = {1: CAMPAIGN_MOMENTS[1:2], 2: CAMPAIGN_MOMENTS[::2], 3: CAMPAIGN_MOMENTS}[args.moments]
     plan = campaign_plan(faults, moments, seeds, paths, NOMINAL_TIME_S)
     return [(f"{f.label().replace(':', '-').replace('@', '_at').replace(',', '_').replace('=', '')}_{path}_s{seed}",
              path, seed, [f]) for path, seed, f in plan]

@@ -625,7 +625,7 @@ def main(argv=None) -> int:
     fg.add_argument("--campaign-faults", default=None, metavar="SPEC",
                     help="the campaign's faults instead of its default list (their times are replaced by the moments)")
     fg.add_argument("--moments", type=int, default=3, choices=(1, 2, 3),
-                    help="moments of the path per fault: 0.2, 0.45, 0.7 of its nominal time")
+                    help="moments of the path per fault: 3 = 0.2, 0.45, 0.7 of its nominal time; 2 = 0.2, 0.7; 1 = 0.45")
     ap.add_argument("--node-param", action="append", default=[], metavar="NODE:NAME=VALUE",
                     help="set a node's parameter for this run (YAML value; repeatable), e.g. "
                          "--node-param tracker_node:frozen_frames=5 --node-param planner_node:stale_periods=3")
