@@ -81,21 +81,23 @@ def summary_table(results) -> str:
     for r in results:
         for pf in r["per_fault"]:
             row = rows.setdefault(_kind(pf["fault"]), {"runs": 0, "completed": 0, "stopped": 0, "failed": 0,
-                                                       "stale": 0, "lost": 0, "recovery": [], "never": 0})
+                                                       "stale": 0, "unverified": 0, "lost": 0, "recovery": [],
+                                                       "never": 0})
             row["runs"] += 1
             row[r["outcome"]] += 1
             row["stale"] += len(r["stale_firings"])
+            row["unverified"] += len(r.get("unverified_firings", []))
             row["lost"] += r["recorder_lost"]
             if pf.get("recovery_s") is None:
                 row["never"] += 1
             else:
                 row["recovery"].append(pf["recovery_s"])
-    lines = ["| fault | runs | completed | stopped cleanly | failed | firings on stale state | recorder lost "
-             "| recovery median / max [s] | not recovered |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| fault | runs | completed | stopped cleanly | failed | firings on stale state | unverified firings "
+             "| recorder lost | recovery median / max [s] | not recovered |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for kind, row in rows.items():
         rec = row["recovery"]
         rec_text = f"{statistics.median(rec):.1f} / {max(rec):.1f}" if rec else "-"
         lines.append(f"| {kind} | {row['runs']} | {row['completed']} | {row['stopped']} | {row['failed']} | "
-                     f"{row['stale']} | {row['lost']} | {rec_text} | {row['never']} |")
+                     f"{row['stale']} | {row['unverified']} | {row['lost']} | {rec_text} | {row['never']} |")
     return "\n".join(lines)

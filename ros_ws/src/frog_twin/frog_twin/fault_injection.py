@@ -42,6 +42,7 @@ class RunObserver:
         self.emergency = None
         self.recorder_up = []           # [(sim t0, sim t1)] with the recorder subscribed to CHECKED_TOPICS
         self.discovery_gaps = []        # [(sim t0, sim t1)] after a node's restart (see DISCOVERY_S)
+        self.planner_restarts = []      # sim times of planner_node's restarts
         self._up_since = None
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         node.create_subscription(Clock, "/clock", self._on_clock, QoSProfile(depth=1,
@@ -78,9 +79,20 @@ class RunObserver:
             if "serial link" in st.name and "EMERGENCY" in st.message and self.emergency is None:
                 self.emergency = st.message
 
-    def node_restarted(self) -> None:
+    def node_restarted(self, name: str) -> None:
         if self.sim_now is not None:
             self.discovery_gaps.append((self.sim_now, self.sim_now + DISCOVERY_S))
+            if name == "planner_node":
+                self.planner_restarts.append(self.sim_now)
+
+    def planner_blind(self) -> list:
+        """[(t0, t1)]: from each planner restart to DISCOVERY_S after the first decision seen from it
+        (until then this node may not have matched the new planner's publisher)."""
+        out = []
+        for t0 in self.planner_restarts:
+            seen = [t for t, _ in self.obs.decisions if t > t0]
+            out.append((t0, (min(seen) if seen else float("inf")) + DISCOVERY_S))
+        return out
 
     def watch_recorder(self, subscribed: bool) -> None:
         """Called every poll with whether the recorder is subscribed to every checked topic."""

@@ -295,7 +295,9 @@ def twin_report_faults(rep: dict) -> str:
         rec = "not recovered" if pf["recovery_s"] is None else f"recovered in {pf['recovery_s']:.1f} s"
         lines.append(f"  {pf['fault']}: {rec}")
     lines.append(f"  limb firings on state older than the bound: {len(rep['stale_firings'])} of {rep['n_firings']}; "
-                 f"messages lost by the recorder while up: {rep['recorder_lost']}")
+                 f"messages lost by the recorder while up: {rep['recorder_lost']}"
+                 + (f"; {len(rep['unverified_firings'])} firing(s) unverified (the watch had not matched the "
+                    f"restarted planner yet)" if rep["unverified_firings"] else ""))
     if rep["injector_failures"]:
         lines.append("  injector actions refused: " + "; ".join(rep["injector_failures"]))
     return "\n".join(lines)
@@ -339,7 +341,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
     watch = PlannerWatch(domain)
     observer = RunObserver(watch.node)
     supervisor = Supervisor(RestartPolicy(), essential=ESSENTIAL_NODES, log=lambda s: print("  " + s, flush=True),
-                            on_restart=lambda name, proc: observer.node_restarted())
+                            on_restart=lambda name, proc: observer.node_restarted(name))
     injector = None
     stop_reason = None
     goal = False
@@ -625,7 +627,8 @@ def main(argv=None) -> int:
     fg.add_argument("--campaign-faults", default=None, metavar="SPEC",
                     help="the campaign's faults instead of its default list (their times are replaced by the moments)")
     fg.add_argument("--moments", type=int, default=3, choices=(1, 2, 3),
-                    help="moments of the path per fault: 3 = 0.2, 0.45, 0.7 of its nominal time; 2 = 0.2, 0.7; 1 = 0.45")
+                    help="moments of the path per fault: 3 = 0.2, 0.45, 0.7 of its nominal time; 2 = 0.2, 0.7; "
+                         "1 = 0.45")
     ap.add_argument("--node-param", action="append", default=[], metavar="NODE:NAME=VALUE",
                     help="set a node's parameter for this run (YAML value; repeatable), e.g. "
                          "--node-param tracker_node:frozen_frames=5 --node-param planner_node:stale_periods=3")

@@ -125,3 +125,12 @@ def test_recorder_losses_count_only_inside_the_up_intervals():
     # a restarted publisher's first seconds are not the recorder's loss
     res = recorder_losses(seen, recorded, up, margin=1.0, excluded=[(17.5, 20.0)])["/a"]
     assert res["lost"] == 1 and res["first_lost"] == [5.0]
+
+
+def test_old_command_verdicts_inside_a_blind_interval_are_unverified_not_stale():
+    obs = Observed(odom=[i / 30 for i in range(600)], decisions=[(1.0, "B"), (9.0, "B")],
+                   fired=[1.05, 6.0, 9.05])
+    bad = stale_firings(obs, [], 3.0, 0.7, blind=[(4.0, 7.0)])
+    assert [(b["fired"], b["unverified"]) for b in bad] == [(6.0, True)]
+    bad = stale_firings(obs, [], 3.0, 0.7)
+    assert [(b["fired"], b["unverified"]) for b in bad] == [(6.0, False)]

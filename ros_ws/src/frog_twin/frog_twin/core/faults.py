@@ -206,13 +206,15 @@ def content_time(stamp: float, faults) -> float:
     return stamp
 
 
-def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float) -> list[dict]:
+def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float, blind=()) -> list[dict]:
     """Limb firings on state older than the bounds: one dict per offending firing.
 
     A firing at ``t`` comes from the last non-I primitive decided at ``t_d <= t``. Its state
     is stale when the newest odometry before ``t_d`` holds information older than
     ``pose_bound`` at ``t_d`` (:func:`content_time`), or when the command is older than
-    ``command_bound`` when it fires (a replayed or queued command).
+    ``command_bound`` when it fires (a replayed or queued command). ``blind``: intervals in
+    which the observer may not see the decisions (a restarted planner whose publisher it has
+    not matched yet); an old-command verdict inside one is ``unverified``, not stale.
     """
     odom = sorted(obs.odom)
     decisions = sorted((t, n) for t, n in obs.decisions if n != "I")
@@ -230,7 +232,9 @@ def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float
             continue
         pose_age = t_d - content_time(odom[j], faults)
         if pose_age > pose_bound or t - t_d > command_bound:
-            bad.append({"fired": t, "decided": t_d, "pose_age": pose_age, "command_age": t - t_d})
+            unseen = pose_age <= pose_bound and any(a <= t <= b for a, b in blind)
+            bad.append({"fired": t, "decided": t_d, "pose_age": pose_age, "command_age": t - t_d,
+                        "unverified": unseen})
     return bad
 
 
@@ -282,7 +286,9 @@ def fault_report(faults, observer, sim_start: float, injector, recorded: dict, p
     """The fault section of a run's metrics: outcome, stale firings, recorder losses, recovery."""
     obs = observer.obs
     shifted = [replace(f, at=f.at + sim_start) for f in faults]
-    stale = stale_firings(obs, shifted, pose_bound, command_bound)
+    flagged = stale_firings(obs, shifted, pose_bound, command_bound, blind=observer.planner_blind())
+    stale = [b for b in flagged if not b.get("unverified")]
+    unverified = [b for b in flagged if b.get("unverified")]
     losses = recorder_losses(observer.seen, recorded, observer.recorder_up, excluded=observer.discovery_gaps)
     lost = sum(v["lost"] for v in losses.values())
     per_fault = []
@@ -295,7 +301,9 @@ def fault_report(faults, observer, sim_start: float, injector, recorded: dict, p
         per_fault.append({"fault": f.label(), "end_s": t_end - sim_start, "recovery_s": rec})
     return {"outcome": outcome(goal, stop_reason, len(stale), lost, unclean),
             "stop_reason": None if goal else stop_reason,
-            "stale_firings": stale, "n_firings": len(obs.fired), "pose_bound_s": pose_bound,
+            "stale_firings": stale, "unverified_firings": unverified, "n_firings": len(obs.fired),
+            "pose_bound_s": pose_bound,
+            "observed": {"decisions": obs.decisions, "fired": obs.fired, "n_odom": len(obs.odom)},
             "last_firing_s": max(obs.fired) - sim_start if obs.fired else None,
             "command_bound_s": command_bound, "recorder": losses, "recorder_lost": lost,
             "recorder_up": observer.recorder_up, "discovery_gaps": observer.discovery_gaps, "per_fault": per_fault,
