@@ -41,7 +41,7 @@ class RunObserver:
         self.sim_now = None
         self.emergency = None
         self.recorder_up = []           # [(sim t0, sim t1)] with the recorder subscribed to CHECKED_TOPICS
-        self.discovery_gaps = []        # [(sim t0, sim t1)] after a node's restart (see DISCOVERY_S)
+        self.restarts = []              # sim times of node restarts (see discovery_gaps)
         self.planner_restarts = []      # sim times of planner_node's restarts
         self._up_since = None
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -81,9 +81,21 @@ class RunObserver:
 
     def node_restarted(self, name: str) -> None:
         if self.sim_now is not None:
-            self.discovery_gaps.append((self.sim_now, self.sim_now + DISCOVERY_S))
+            self.restarts.append(self.sim_now)
             if name == "planner_node":
                 self.planner_restarts.append(self.sim_now)
+
+    def discovery_gaps(self) -> dict:
+        """{topic: [(t0, t1)]}: from each restart to DISCOVERY_S after the first message seen on the topic
+        after it (a restarted publisher is matched by the recorder only after discovery)."""
+        out = {}
+        for topic, stamps in self.seen.items():
+            gaps = []
+            for t0 in self.restarts:
+                later = [t for t in stamps if t > t0]
+                gaps.append((t0, (min(later) if later else float("inf")) + DISCOVERY_S))
+            out[topic] = gaps
+        return out
 
     def planner_blind(self) -> list:
         """[(t0, t1)]: from each planner restart to DISCOVERY_S after the first decision seen from it

@@ -358,6 +358,9 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
         watch.wait(lambda: watch.subscribed("recorder", recorded), 60,
                    f"the recorder subscribed to {', '.join(recorded)}", supervisor.processes())
         watch.wait(lambda: observer.sim_now is not None, 30, "/clock", supervisor.processes())
+        # the idle planner publishes I every period: once the watch has one, it hears every decision
+        watch.wait(lambda: observer.obs.decisions, 60, "the idle planner's primitive I on /frog/primitive",
+                   supervisor.processes())
         watch.start_planner()
         sim_start = observer.sim_now
         injector = FaultInjector(watch.node, faults, supervisor, log=lambda s: print("  " + s, flush=True))

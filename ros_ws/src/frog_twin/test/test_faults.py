@@ -103,9 +103,12 @@ def test_stale_firings_flag_decisions_on_old_state_and_old_commands():
 
 def test_recovery_time_and_outcome():
     status = [(t, 1) for t in (1, 2, 3)] + [(4, 3), (5, 3), (6, 3)] + [(7.5, 1), (9, 1)]
-    assert recovery_time(status, 6.2, 1) == pytest.approx(1.3)
-    assert recovery_time(status, 2.5, 1) == pytest.approx(0.5)     # still following after the fault: ~0
-    assert recovery_time(status[:6], 4.5, 1) is None
+    assert recovery_time(status, 3.5, 6.2, 3.0) == pytest.approx(1.3)
+    # blocked only after the fault's end (a kill shows when the pose goes stale): from the end
+    assert recovery_time(status, 2.5, 2.5, 3.0) == pytest.approx(5.0)
+    assert recovery_time(status, 0.5, 2.5, 1.0) == 0.0           # never blocked in its window
+    assert recovery_time(status[:6], 3.5, 4.5, 3.0) is None       # blocked to the end
+    assert recovery_time([(1, 1), (2, 2)], 1.5, 8.0, 3.0) == 0.0  # goal reached during the fault
     assert outcome(True, None, 0, 0, []) == "completed"
     assert outcome(False, "emergency", 0, 0, []) == "stopped"
     assert outcome(True, None, 1, 0, []) == "failed"
@@ -123,7 +126,7 @@ def test_recorder_losses_count_only_inside_the_up_intervals():
     assert res["expected"] == len([t for t in range(20) if 1 <= t <= 9 or 14 <= t <= 18.5])
     assert not math.isnan(res["expected"])
     # a restarted publisher's first seconds are not the recorder's loss
-    res = recorder_losses(seen, recorded, up, margin=1.0, excluded=[(17.5, 20.0)])["/a"]
+    res = recorder_losses(seen, recorded, up, margin=1.0, excluded={"/a": [(17.5, 20.0)]})["/a"]
     assert res["lost"] == 1 and res["first_lost"] == [5.0]
 
 
@@ -134,3 +137,11 @@ def test_old_command_verdicts_inside_a_blind_interval_are_unverified_not_stale()
     assert [(b["fired"], b["unverified"]) for b in bad] == [(6.0, True)]
     bad = stale_firings(obs, [], 3.0, 0.7)
     assert [(b["fired"], b["unverified"]) for b in bad] == [(6.0, False)]
+
+
+def test_a_firing_stamped_just_before_its_decision_is_that_decision_s():
+    """Node clocks under /clock differ by ms: a firing 10 ms 'before' its decision is not the previous one's."""
+    obs = Observed(odom=[i / 30 for i in range(300)], decisions=[(1.0, "B"), (2.43, "B")], fired=[1.02, 2.42])
+    assert stale_firings(obs, [], 3.0, 0.7) == []
+    obs.fired.append(2.3)      # 130 ms before: a firing of the first decision, 1.3 s old
+    assert [b["fired"] for b in stale_firings(obs, [], 3.0, 0.7)] == [2.3]

@@ -206,6 +206,12 @@ def content_time(stamp: float, faults) -> float:
     return stamp
 
 
+#: how far two nodes' clocks under /clock can differ: each follows /clock when its executor
+#: gets to it, so the robot's firing can be stamped a few ms before the decision behind it
+#: (the same ms in a quiet run; one period early was misread as a 1.4 s old command)
+CLOCK_SKEW_S = 0.05
+
+
 def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float, blind=()) -> list[dict]:
     """Limb firings on state older than the bounds: one dict per offending firing.
 
@@ -221,7 +227,7 @@ def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float
     d_times = [t for t, _ in decisions]
     bad = []
     for t in sorted(obs.fired):
-        i = bisect.bisect_right(d_times, t + 1e-6) - 1
+        i = bisect.bisect_right(d_times, t + CLOCK_SKEW_S) - 1
         if i < 0:
             bad.append({"fired": t, "why": "no primitive was decided before it"})
             continue
@@ -238,35 +244,43 @@ def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float
     return bad
 
 
-def recovery_time(status, t_end: float, following: int) -> float | None:
-    """Simulated s from ``t_end`` until the planner follows again (0 if it never stopped); None if never."""
+def recovery_time(status, t_start: float, t_end: float, window: float, following: int = 1,
+                  goal: int = 2) -> float | None:
+    """Simulated s from ``t_end`` until the planner follows again; 0 if it was never blocked; None if never.
+
+    The planner is blocked by the fault if a status in [t_start, t_end + window] is neither
+    following nor goal reached (``window``: how long a fault takes to show, e.g. the stale
+    bound). Recovery is the first following (or goal) status after that.
+    """
     rows = sorted(status)
-    blocked = [(t, s) for t, s in rows if t >= t_end]
+    blocked = [t for t, s in rows if t_start <= t <= t_end + window and s not in (following, goal)]
     if not blocked:
-        return None
-    for t, s in blocked:
-        if s == following:
+        return 0.0
+    for t, s in rows:
+        if t > blocked[0] and s in (following, goal):
             return max(0.0, t - t_end)
     return None
 
 
-def recorder_losses(seen: dict, recorded: dict, up_intervals, margin: float = 1.0, excluded=()) -> dict:
+def recorder_losses(seen: dict, recorded: dict, up_intervals, margin: float = 1.0, excluded=None) -> dict:
     """Per topic, the messages the watch saw while the recorder was up that the MCAP lacks.
 
     ``seen`` / ``recorded``: {topic: [stamp]}; ``up_intervals``: [(t0, t1)] in the same
     clock, the recorder's subscriptions live; a message within ``margin`` of an interval's
     ends is not counted (discovery and the kill are not instantaneous), nor one inside an
-    ``excluded`` interval (a restarted node's first seconds, before DDS has matched its new
-    publishers with the recorder: the recorder never saw those messages).
+    ``excluded[topic]`` interval (a restarted node's first seconds, before DDS has matched
+    its new publishers with the recorder: the recorder never saw those messages).
     """
-    def expected(s):
+    excluded = excluded or {}
+
+    def expected(topic, s):
         return (any(a + margin <= s <= b - margin for a, b in up_intervals)
-                and not any(a <= s <= b for a, b in excluded))
+                and not any(a <= s <= b for a, b in excluded.get(topic, ())))
 
     out = {}
     for topic, stamps in seen.items():
         have = set(round(s, 6) for s in recorded.get(topic, ()))
-        want = [s for s in stamps if expected(s)]
+        want = [s for s in stamps if expected(topic, s)]
         missing = [s for s in want if round(s, 6) not in have]
         out[topic] = {"expected": len(want), "lost": len(missing), "first_lost": missing[:3]}
     return out
@@ -289,15 +303,15 @@ def fault_report(faults, observer, sim_start: float, injector, recorded: dict, p
     flagged = stale_firings(obs, shifted, pose_bound, command_bound, blind=observer.planner_blind())
     stale = [b for b in flagged if not b.get("unverified")]
     unverified = [b for b in flagged if b.get("unverified")]
-    losses = recorder_losses(observer.seen, recorded, observer.recorder_up, excluded=observer.discovery_gaps)
+    gaps = observer.discovery_gaps()
+    losses = recorder_losses(observer.seen, recorded, observer.recorder_up, excluded=gaps)
     lost = sum(v["lost"] for v in losses.values())
     per_fault = []
-    following = 1   # PlannerStatus.STATE_FOLLOWING
     for f, g in zip(faults, shifted):
         # the end of a wall-timed fault is when its undo action ran
         ends = [t for t, _, what in injector.done if what.startswith(f.label() + ":")]
         t_end = max(ends) if ends else g.end
-        rec = None if f.kind == "emergency" else recovery_time(obs.status, t_end, following)
+        rec = None if f.kind == "emergency" else recovery_time(obs.status, g.at, t_end, pose_bound + 2.0)
         per_fault.append({"fault": f.label(), "end_s": t_end - sim_start, "recovery_s": rec})
     return {"outcome": outcome(goal, stop_reason, len(stale), lost, unclean),
             "stop_reason": None if goal else stop_reason,
@@ -306,6 +320,6 @@ def fault_report(faults, observer, sim_start: float, injector, recorded: dict, p
             "observed": {"decisions": obs.decisions, "fired": obs.fired, "n_odom": len(obs.odom)},
             "last_firing_s": max(obs.fired) - sim_start if obs.fired else None,
             "command_bound_s": command_bound, "recorder": losses, "recorder_lost": lost,
-            "recorder_up": observer.recorder_up, "discovery_gaps": observer.discovery_gaps, "per_fault": per_fault,
+            "recorder_up": observer.recorder_up, "discovery_gaps": gaps, "per_fault": per_fault,
             "actions": [(t - sim_start, what) for t, _, what in injector.done],
             "injector_failures": injector.failures(), "unclean_stops": list(unclean)}
