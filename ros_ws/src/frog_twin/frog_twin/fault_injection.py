@@ -39,6 +39,7 @@ class RunObserver:
         self.obs = Observed()
         self.seen = {t: [] for t in CHECKED_TOPICS}
         self.sim_now = None
+        self._arrivals = 0
         self.emergency = None
         self.recorder_up = []           # [(sim t0, sim t1)] with the recorder subscribed to CHECKED_TOPICS
         self.restarts = []              # sim times of node restarts (see discovery_gaps)
@@ -62,6 +63,11 @@ class RunObserver:
         t = _stamp(msg)
         self.seen["/frog/primitive"].append(t)
         self.obs.decisions.append((t, msg.name))
+        self.obs.decision_seq.append(self._next())
+
+    def _next(self) -> int:
+        self._arrivals += 1
+        return self._arrivals
 
     def _on_status(self, msg) -> None:
         t = _stamp(msg)
@@ -73,6 +79,7 @@ class RunObserver:
         self.seen["/frog/limb_activation"].append(t)
         if len(msg.limbs):
             self.obs.fired.append(t)
+            self.obs.fired_seq.append(self._next())
 
     def _on_diagnostics(self, msg) -> None:
         for st in msg.status:

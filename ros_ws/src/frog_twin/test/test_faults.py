@@ -145,3 +145,17 @@ def test_a_firing_stamped_just_before_its_decision_is_that_decision_s():
     assert stale_firings(obs, [], 3.0, 0.7) == []
     obs.fired.append(2.3)      # 130 ms before: a firing of the first decision, 1.3 s old
     assert [b["fired"] for b in stale_firings(obs, [], 3.0, 0.7)] == [2.3]
+
+
+def test_arrival_order_attributes_a_firing_stamped_well_before_its_decision():
+    """Under load the robot's clock can trail the planner's by 250 ms (seen in the campaign): the
+    arrival order at the observer is causal, the stamps are not."""
+    obs = Observed(odom=[i / 30 for i in range(900)], decisions=[(14.3, "B"), (18.59, "D")], fired=[14.3, 18.34],
+                   decision_seq=[1, 3], fired_seq=[2, 4])
+    assert stale_firings(obs, [], 3.0, 0.7) == []
+    # the same stamps ordered by stamps alone would blame the 4 s old decision
+    no_order = Observed(odom=obs.odom, decisions=obs.decisions, fired=obs.fired)
+    assert [b["fired"] for b in stale_firings(no_order, [], 3.0, 0.7)] == [18.34]
+    # a firing that really arrives after a long silence of the planner is still stale
+    late = Observed(odom=obs.odom, decisions=[(14.3, "B")], fired=[14.3, 18.34], decision_seq=[1], fired_seq=[2, 3])
+    assert [b["fired"] for b in stale_firings(late, [], 3.0, 0.7)] == [18.34]

@@ -191,6 +191,10 @@ class Observed:
     decisions: list = field(default_factory=list)     # (stamp, primitive name) of frog/primitive
     fired: list = field(default_factory=list)         # stamps of frog/limb_activation (the robot fired)
     status: list = field(default_factory=list)        # (stamp, state) of frog/planner/status
+    # arrival order at the observer (one counter for both lists; empty = order by stamps): the
+    # causal order, where stamps from two nodes' clocks can disagree by a few hundred ms under load
+    decision_seq: list = field(default_factory=list)
+    fired_seq: list = field(default_factory=list)
 
 
 def content_time(stamp: float, faults) -> float:
@@ -215,7 +219,8 @@ CLOCK_SKEW_S = 0.05
 def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float, blind=()) -> list[dict]:
     """Limb firings on state older than the bounds: one dict per offending firing.
 
-    A firing at ``t`` comes from the last non-I primitive decided at ``t_d <= t``. Its state
+    A firing comes from the last non-I primitive the observer received before it (arrival
+    order: causal; without it, by stamps, allowing ``CLOCK_SKEW_S``), decided at ``t_d``. Its state
     is stale when the newest odometry before ``t_d`` holds information older than
     ``pose_bound`` at ``t_d`` (:func:`content_time`), or when the command is older than
     ``command_bound`` when it fires (a replayed or queued command). ``blind``: intervals in
@@ -223,20 +228,30 @@ def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float
     not matched yet); an old-command verdict inside one is ``unverified``, not stale.
     """
     odom = sorted(obs.odom)
-    decisions = sorted((t, n) for t, n in obs.decisions if n != "I")
-    d_times = [t for t, _ in decisions]
+    by_arrival = len(obs.decision_seq) == len(obs.decisions) and len(obs.fired_seq) == len(obs.fired) \
+        and obs.decision_seq
+    if by_arrival:
+        kicks = sorted((q, t) for (t, n), q in zip(obs.decisions, obs.decision_seq) if n != "I")
+        d_keys, d_stamps = [q for q, _ in kicks], [t for _, t in kicks]
+        firings = sorted(zip(obs.fired_seq, obs.fired))
+    else:
+        kicks = sorted(t for t, n in obs.decisions if n != "I")
+        d_keys = d_stamps = [t + 0.0 for t in kicks]
+        firings = [(t + CLOCK_SKEW_S, t) for t in sorted(obs.fired)]
     bad = []
-    for t in sorted(obs.fired):
-        i = bisect.bisect_right(d_times, t + CLOCK_SKEW_S) - 1
+    for key, t in firings:
+        i = bisect.bisect_right(d_keys, key) - 1
         if i < 0:
             bad.append({"fired": t, "why": "no primitive was decided before it"})
             continue
-        t_d = d_times[i]
+        t_d = d_stamps[i]
         j = bisect.bisect_right(odom, t_d + 1e-6) - 1
         if j < 0:
             bad.append({"fired": t, "decided": t_d, "why": "decided before any odometry"})
             continue
         pose_age = t_d - content_time(odom[j], faults)
+        # the firing's stamp is the robot's clock, the decision's the planner's: under load the
+        # robot's can trail by a few hundred ms, so a negative age is a 0 age
         if pose_age > pose_bound or t - t_d > command_bound:
             unseen = pose_age <= pose_bound and any(a <= t <= b for a, b in blind)
             bad.append({"fired": t, "decided": t_d, "pose_age": pose_age, "command_age": t - t_d,
