@@ -109,6 +109,9 @@ def test_recovery_time_and_outcome():
     assert recovery_time(status, 0.5, 2.5, 1.0) == 0.0           # never blocked in its window
     assert recovery_time(status[:6], 3.5, 4.5, 3.0) is None       # blocked to the end
     assert recovery_time([(1, 1), (2, 2)], 1.5, 8.0, 3.0) == 0.0  # goal reached during the fault
+    # a killed planner says nothing: the silence is the block, recovery its first status after
+    dead = [(t, 1) for t in (1.0, 2.4, 3.9)] + [(9.5, 3), (10.9, 1), (12.3, 1)]
+    assert recovery_time(dead, 4.0, 4.0, 3.0) == pytest.approx(6.9)
     assert outcome(True, None, 0, 0, []) == "completed"
     assert outcome(False, "emergency", 0, 0, []) == "stopped"
     assert outcome(True, None, 1, 0, []) == "failed"

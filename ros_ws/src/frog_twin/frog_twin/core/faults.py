@@ -260,19 +260,27 @@ def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float
 
 
 def recovery_time(status, t_start: float, t_end: float, window: float, following: int = 1,
-                  goal: int = 2) -> float | None:
+                  goal: int = 2, gap: float = 2.2) -> float | None:
     """Simulated s from ``t_end`` until the planner follows again; 0 if it was never blocked; None if never.
 
     The planner is blocked by the fault if a status in [t_start, t_end + window] is neither
     following nor goal reached (``window``: how long a fault takes to show, e.g. the stale
-    bound). Recovery is the first following (or goal) status after that.
+    bound), or if no status came for longer than ``gap`` there (a dead or starved planner
+    says nothing; it decides every 1.43 s). Recovery is the first following (or goal)
+    status after the first blocked moment.
     """
     rows = sorted(status)
-    blocked = [t for t, s in rows if t_start <= t <= t_end + window and s not in (following, goal)]
-    if not blocked:
+    if not rows:
+        return None
+    lo, hi = t_start, min(t_end + window, rows[-1][0])     # the run's end is no silence
+    blocked = [t for t, s in rows if lo <= t <= hi and s not in (following, goal)]
+    times = [lo] + [t for t, _ in rows if lo < t <= hi]
+    silent = [a for a, b in zip(times, times[1:] + [hi]) if b - a > gap]
+    first = min(blocked[:1] + silent[:1], default=None)
+    if first is None:
         return 0.0
     for t, s in rows:
-        if t > blocked[0] and s in (following, goal):
+        if t > first and s in (following, goal):
             return max(0.0, t - t_end)
     return None
 
