@@ -228,6 +228,8 @@ VISION_NODES = ("camera_sim", "tracker_node", "image_preview")
 #: not restarted after a crash: the simulated world (a new one would start from the initial pose)
 #: and the robot; the run stops instead
 ESSENTIAL_NODES = ("sim_node", "robot_emulator")
+#: topics every twin run has (the bridge's are absent with --direct): the recorder's subscriptions to them
+PLANNER_TOPICS = ("/frog/primitive", "/frog/planner/status")
 SERIAL_NODES = ("robot_emulator", "bridge_node")
 
 
@@ -354,7 +356,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
         watch.wait(lambda: watch.odom_count >= 5, 120, "odometry on /frog/odom (camera + tracker running)",
                    supervisor.processes())
         # the metrics start at the planner's first decision: the recorder must hear it
-        recorded = ("/frog/sim/odom", *CHECKED_TOPICS)
+        recorded = ("/frog/sim/odom", *PLANNER_TOPICS)     # (no bridge topics with --direct)
         watch.wait(lambda: watch.subscribed("recorder", recorded), 60,
                    f"the recorder subscribed to {', '.join(recorded)}", supervisor.processes())
         watch.wait(lambda: observer.sim_now is not None, 30, "/clock", supervisor.processes())
@@ -377,7 +379,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
             if stop_reason:
                 break
             observer.watch_recorder("recorder" in supervisor.names() and not supervisor.down("recorder")
-                                    and watch.subscribed("recorder", CHECKED_TOPICS))
+                                    and watch.subscribed("recorder", PLANNER_TOPICS))
             if watch.state == watch.Status.STATE_GOAL_REACHED:
                 goal = True
                 break
