@@ -581,6 +581,18 @@ def apply_actuation(t, limb_profile, limb_young, activation_times, activation_of
                     edge_area, root_index, root_limb, root_sign, root_base_angle, root_half_edge,
                     root_length, root_second_moment, kappa0, ei, ea):
     """Write the natural curvature and stiffness of actuated elements at time ``t`` [s]."""
+    update_actuators(t, (limb_profile, limb_young, activation_times, activation_offsets,
+                         bend_index, bend_limb, bend_sign, bend_second_moment, edge_index,
+                         edge_limb, edge_area, root_index, root_limb, root_sign, root_base_angle,
+                         root_half_edge, root_length, root_second_moment), kappa0, ei, ea)
+
+
+@njit(cache=True, error_model='numpy')
+def update_actuators(t, actuator, kappa0, ei, ea):
+    """:func:`apply_actuation` with the actuator arrays packed as ``ActuatorArrays.as_tuple()``."""
+    (limb_profile, limb_young, activation_times, activation_offsets, bend_index, bend_limb,
+     bend_sign, bend_second_moment, edge_index, edge_limb, edge_area, root_index, root_limb,
+     root_sign, root_base_angle, root_half_edge, root_length, root_second_moment) = actuator
     n_limbs = limb_profile.shape[0]
     kap = np.empty(n_limbs)
     young = np.empty(n_limbs)

@@ -33,8 +33,12 @@ sparse Jacobian.
 """
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
+
+from .element_sets import register_explicit_term
 
 
 @njit(cache=True, error_model='numpy')
@@ -113,3 +117,22 @@ def body_damping(x, v, mass, reference, surge=0.0, sway=0.0, yaw=0.0) -> tuple[n
                                np.ascontiguousarray(mass, dtype=float), np.ascontiguousarray(reference, dtype=float),
                                float(surge), float(sway), float(yaw), out)
     return out, float(power)
+
+
+BodyDampingTerm = namedtuple('BodyDampingTerm', 'mass reference coefficients')
+BodyDampingTerm.__doc__ = """The lumped body damping as an explicit integrator term. Its one element
+touches every DOF (DOF map ``arange(2N)``): nodal masses (N,) [kg], the reference pose
+(N, 2) [m] and (X_u, Y_v, N_r) (3,); all-zero coefficients switch it off."""
+
+
+@njit(cache=True, error_model='numpy')
+def body_damping_term(term, m, xe, ve, force):
+    """Explicit-term kernel of :class:`BodyDampingTerm`: the force at the start of the step."""
+    c = term.coefficients
+    if c[0] == 0.0 and c[1] == 0.0 and c[2] == 0.0:
+        return False
+    body_damping_force(xe, ve, term.mass, term.reference, c[0], c[1], c[2], force)
+    return True
+
+
+register_explicit_term(BodyDampingTerm, body_damping_term)

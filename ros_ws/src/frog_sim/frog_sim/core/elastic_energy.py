@@ -15,8 +15,12 @@ The kernels are numba-compiled (``cache=True``) and work on flat state vectors
 """
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
+
+from .element_sets import register_implicit_term
 
 
 @njit(cache=True, fastmath=True, error_model='numpy')
@@ -161,6 +165,35 @@ def bend_element(xa0, xa1, xb0, xb1, xc0, xc1, dl, ei, kappa0, grad, hess, work,
             hess[4 + p, 2 + q] = h21 - h22
             hess[4 + p, 4 + q] = h22
     return energy
+
+
+# ---------------------------------------------------------------- integrator terms
+StretchTerm = namedtuple('StretchTerm', 'rest_length stiffness')
+StretchTerm.__doc__ = """Stretching energy E_s of the edges (an element = the 4 DOFs of an edge):
+rest lengths dl (E,) [m] and EA (E,) [N] (the live array the actuation writes)."""
+
+BendTerm = namedtuple('BendTerm', 'length stiffness natural_curvature work')
+BendTerm.__doc__ = """Bending energy E_b of the bends (an element = the 6 DOFs of a node triple):
+Voronoi lengths dl (B,) [m], EI (B,) [N m^2], kappa0 (B,) [1/m] (live arrays of the
+actuation) and a scratch array (3, 4, 4)."""
+
+
+@njit(cache=True, error_model='numpy')
+def stretch_term(term, m, xe, ve, grad, hess, dgdv, want_jac):
+    """Implicit-term kernel of :class:`StretchTerm` (gradient and Hessian of E_s, eq. 8)."""
+    stretch_element(xe[0], xe[1], xe[2], xe[3], term.rest_length[m], term.stiffness[m], grad, hess,
+                    want_jac)
+
+
+@njit(cache=True, error_model='numpy')
+def bend_term(term, m, xe, ve, grad, hess, dgdv, want_jac):
+    """Implicit-term kernel of :class:`BendTerm` (gradient and Hessian of E_b, eq. 8)."""
+    bend_element(xe[0], xe[1], xe[2], xe[3], xe[4], xe[5], term.length[m], term.stiffness[m],
+                 term.natural_curvature[m], grad, hess, term.work, want_jac)
+
+
+register_implicit_term(StretchTerm, stretch_term)
+register_implicit_term(BendTerm, bend_term)
 
 
 @njit(cache=True, error_model='numpy')

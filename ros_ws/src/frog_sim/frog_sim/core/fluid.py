@@ -17,8 +17,12 @@ structural linear density.
 """
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
+
+from .element_sets import register_implicit_term
 
 
 def drag_prefactors(network, fluid_density: float):
@@ -156,3 +160,24 @@ def drag_forces(x, v, edges, cn, ct, force_out):
         force_out[2 * a + 1] += f4[1]
         force_out[2 * b] += f4[2]
         force_out[2 * b + 1] += f4[3]
+
+
+DragTerm = namedtuple('DragTerm', 'normal tangent')
+DragTerm.__doc__ = """Quadratic drag of eq. 1-2 on the edges (an element = the 4 DOFs of an edge):
+prefactors 1/2 rho_f C D dl for the normal and tangent directions (E,) [kg/m]."""
+
+
+@njit(cache=True, error_model='numpy')
+def drag_term(term, m, xe, ve, grad, hess, dgdv, want_jac):
+    """Implicit-term kernel of :class:`DragTerm`: ``-f_d``, ``-df_d/dx``, ``-df_d/dv`` (eq. 6, 8)."""
+    drag_element(xe[0], xe[1], xe[2], xe[3], ve[0], ve[1], ve[2], ve[3], term.normal[m],
+                 term.tangent[m], grad, dgdv, hess, want_jac)
+    for p in range(4):
+        grad[p] = -grad[p]
+        if want_jac:
+            for q in range(4):
+                hess[p, q] = -hess[p, q]
+                dgdv[p, q] = -dgdv[p, q]
+
+
+register_implicit_term(DragTerm, drag_term, velocity_dependent=True)

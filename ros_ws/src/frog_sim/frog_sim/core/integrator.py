@@ -24,16 +24,18 @@ unpivoted numba sparse LU fails, or on request (``solver='superlu'``).
 """
 from __future__ import annotations
 
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse.linalg as spla
-from numba import njit
+from numba import literal_unroll, njit
 
-from .actuation import ActuatorArrays, apply_actuation
-from .body_damping import body_damping_force
-from .elastic_energy import bend_element, stretch_element
-from .fluid import drag_element, drag_prefactors
+from .actuation import ActuatorArrays, update_actuators
+from .body_damping import BodyDampingTerm
+from .elastic_energy import BendTerm, StretchTerm
+from .element_sets import ElementSet, ExplicitSet, add_explicit_set, assemble_element_set, scatter_maps
+from .fluid import DragTerm, drag_prefactors
 from .linear_algebra import build_jacobian_pattern, sparse_lu_factor, sparse_lu_pack, sparse_lu_substitute
 
 STATUS_OK = 0
@@ -49,19 +51,50 @@ class ConvergenceError(RuntimeError):
     """A time step failed even after the allowed number of step halvings."""
 
 
+System = namedtuple('System', 'mass2 fixed diag_maps element_sets explicit_sets actuator kappa0 ei ea')
+System.__doc__ = """What the equations of motion are made of, for the numba step.
+
+mass2 (2N,) lumped masses per DOF [kg] (eq. 4); fixed (2N,) bool clamped DOFs; diag_maps
+(2, 2N) int32 diagonal slots in the LU [0] / CSR [1] values; element_sets: tuple of
+:class:`~frog_sim.core.element_sets.ElementSet` (implicit terms: stretch + drag on the
+edges, bend on the triples); explicit_sets: tuple of
+:class:`~frog_sim.core.element_sets.ExplicitSet` (lagged terms: the body damping);
+actuator: ``ActuatorArrays.as_tuple()``; kappa0, ei, ea: the live arrays it writes."""
+
+State = namedtuple('State', 'x v x_prev v_prev v_old time')
+State.__doc__ = """Positions x and velocities v (2N,) (updated in place), the start of the current step
+x_prev, v_prev, the velocity of the step before v_old (predictor), and time (1,) [s]."""
+
+Solver = namedtuple('Solver', 'perm plan force_tol pos_tol max_iter refresh_ratio')
+Solver.__doc__ = """Newton settings and the sparse LU plan: perm (2N,), plan = (diag, low_ptr, low_row,
+low_idx, up_ptr, up_col, up_idx, op_ptr, op_target) of a
+:class:`~frog_sim.core.linear_algebra.SparseLUPlan`, tolerances [N], [m], iteration
+limit and the Jacobian refresh ratio of simplified Newton."""
+
+Workspace = namedtuple('Workspace', 'lu packed rhs resid x_last f_total lu_state')
+Workspace.__doc__ = """Work arrays of the numba step: lu (LU values + trash slot), packed factors, rhs,
+resid (2N,), the iterate before the last update x_last, the applied force of the step
+f_total (2N,), lu_state = [factors valid, factorisations]."""
+
+LU_TARGET = 0
+CSR_TARGET = 1
+
+
 @njit(cache=True, error_model='numpy')
-def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0,
-                    cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, dynamic, data, resid,
+def assemble_system(system, x, x_prev, v_prev, h, f_ext, fixed, target, dynamic, data, resid,
                     want_jac=True):
     """Residual (eq. 6) into ``resid`` (2N,) and Jacobian (eq. 8) scattered into ``data``.
 
-    ``dynamic=False`` assembles the static problem ``dE/dx - f_ext = 0`` (no inertia, no
-    drag). Rows/columns of ``fixed`` DOFs are replaced by the identity: the element maps
-    send their entries to a trash slot (the last entry of ``data``). With
-    ``want_jac=False`` only the residual is computed. Returns the max-norm of the
-    residual over free DOFs [N].
+    Inertia ``M (x - x_k - h v_k) / h^2`` and ``-f_ext``, then every element set of
+    ``system`` (``target`` 0: LU value array, 1: CSR). ``dynamic=False`` assembles the
+    static problem ``dE/dx - f_ext = 0`` (no inertia, no velocity-dependent terms). Rows and
+    columns of ``fixed`` DOFs are replaced by the identity: the element maps send their
+    entries to a trash slot (the last entry of ``data``). With ``want_jac=False`` only the
+    residual is computed. Returns the max-norm of the residual over free DOFs [N].
     """
     n = x.shape[0]
+    diag_map = system.diag_maps[target]
+    mass2 = system.mass2
     if want_jac:
         for k in range(data.shape[0]):
             data[k] = 0.0
@@ -74,54 +107,8 @@ def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_le
                 data[diag_map[d]] += mass2[d] * inv_h2
         else:
             resid[d] = -f_ext[d]
-    g4 = np.empty(4)
-    h4 = np.empty((4, 4))
-    g6 = np.empty(6)
-    h6 = np.empty((6, 6))
-    work = np.empty((3, 4, 4))
-    jv = np.empty((4, 4))
-    jx = np.empty((4, 4))
-    dof4 = np.empty(4, dtype=np.int64)
-    dof6 = np.empty(6, dtype=np.int64)
-    for m in range(edges.shape[0]):
-        a = edges[m, 0]
-        b = edges[m, 1]
-        dof4[0] = 2 * a
-        dof4[1] = 2 * a + 1
-        dof4[2] = 2 * b
-        dof4[3] = 2 * b + 1
-        stretch_element(x[dof4[0]], x[dof4[1]], x[dof4[2]], x[dof4[3]], rest[m], ea[m], g4, h4,
-                        want_jac)
-        if dynamic:
-            va0 = (x[dof4[0]] - x_prev[dof4[0]]) * inv_h
-            va1 = (x[dof4[1]] - x_prev[dof4[1]]) * inv_h
-            vb0 = (x[dof4[2]] - x_prev[dof4[2]]) * inv_h
-            vb1 = (x[dof4[3]] - x_prev[dof4[3]]) * inv_h
-            drag_element(x[dof4[0]], x[dof4[1]], x[dof4[2]], x[dof4[3]], va0, va1, vb0, vb1,
-                         cn[m], ct[m], g6, jv, jx, want_jac)
-            for p in range(4):
-                g4[p] -= g6[p]
-                if want_jac:
-                    for q in range(4):
-                        h4[p, q] -= jx[p, q] + jv[p, q] * inv_h
-        for p in range(4):
-            resid[dof4[p]] += g4[p]
-        if want_jac:
-            for p in range(4):
-                for q in range(4):
-                    data[edge_map[m, p, q]] += h4[p, q]
-    for m in range(bends.shape[0]):
-        for r in range(3):
-            dof6[2 * r] = 2 * bends[m, r]
-            dof6[2 * r + 1] = 2 * bends[m, r] + 1
-        bend_element(x[dof6[0]], x[dof6[1]], x[dof6[2]], x[dof6[3]], x[dof6[4]], x[dof6[5]],
-                     bend_len[m], ei[m], kappa0[m], g6, h6, work, want_jac)
-        for p in range(6):
-            resid[dof6[p]] += g6[p]
-        if want_jac:
-            for p in range(6):
-                for q in range(6):
-                    data[bend_map[m, p, q]] += h6[p, q]
+    for es in literal_unroll(system.element_sets):
+        assemble_element_set(es, target, x, x_prev, inv_h, dynamic, resid, data, want_jac)
     norm = 0.0
     for d in range(n):
         if fixed[d]:
@@ -138,37 +125,37 @@ def assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_le
 
 
 @njit(cache=True, error_model='numpy')
-def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0,
-                  cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, dynamic,
-                  force_tol, pos_tol, max_iter, lu, rhs, resid, lu_state, reuse, packed,
-                  refresh_ratio=0.5):
+def newton_direct(system, solver, work, x, x_prev, v_prev, f_ext, h, dynamic, reuse):
     """Newton iterations (eq. 7) with the numba sparse LU; ``x`` holds the guess and result.
 
-    ``plan`` = (diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx, op_ptr,
-    op_target) of a :class:`~frog_sim.core.linear_algebra.SparseLUPlan`.
-    With ``reuse`` the LU factors kept in ``lu`` (valid when ``lu_state[0] == 1``) are
-    reused across iterations and steps (simplified Newton); the Jacobian is
+    With ``reuse`` the LU factors kept in ``work.lu`` (valid when ``work.lu_state[0] == 1``)
+    are reused across iterations and steps (simplified Newton); the Jacobian is
     re-assembled and re-factorised as soon as the residual contracts by less than
-    ``1 / refresh_ratio`` per iteration. Convergence: ``max|F| <= force_tol``, or a full Newton
-    update (fresh Jacobian) with ``max|dx| <= pos_tol``. ``lu_state[1]`` counts
-    factorisations. Returns (status, iterations, residual norm).
+    ``1 / solver.refresh_ratio`` per iteration. Convergence: ``max|F| <= force_tol``, or a
+    full Newton update (fresh Jacobian) with ``max|dx| <= pos_tol``. ``lu_state[1]``
+    counts factorisations. Returns (status, iterations, residual norm).
     """
     n = x.shape[0]
-    diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx, op_ptr, op_t = plan
+    diag, low_ptr, low_row, low_idx, up_ptr, up_col, up_idx, op_ptr, op_t = solver.plan
+    perm = solver.perm
+    lu = work.lu
+    rhs = work.rhs
+    resid = work.resid
+    lu_state = work.lu_state
+    x_last = work.x_last   # iterate before the last update (to undo a bad simplified step)
+    fixed = system.fixed
     norm = np.inf
     prev = np.inf
-    x_last = x.copy()      # iterate before the last update (to undo a bad simplified step)
     last_fresh = True      # was the last update a full Newton step?
-    for it in range(max_iter):
+    for it in range(solver.max_iter):
         if not reuse:
             lu_state[0] = 0
         fresh = lu_state[0] == 0
-        norm = assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len,
-                               ei, kappa0, cn, ct, f_ext, fixed, edge_map, bend_map, diag_map,
-                               dynamic, lu, resid, False)
-        if norm <= force_tol:
+        norm = assemble_system(system, x, x_prev, v_prev, h, f_ext, fixed, LU_TARGET, dynamic,
+                               lu, resid, False)
+        if norm <= solver.force_tol:
             return STATUS_OK, it, norm
-        if not fresh and not (norm <= refresh_ratio * prev):
+        if not fresh and not (norm <= solver.refresh_ratio * prev):
             fresh = True
             if not last_fresh:
                 # a simplified step (old factors) contracted too little or diverged: go back
@@ -180,22 +167,21 @@ def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len,
             lu_state[0] = 0
             return STATUS_NOT_FINITE, it, norm
         if fresh:
-            assemble_system(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei,
-                            kappa0, cn, ct, f_ext, fixed, edge_map, bend_map, diag_map, dynamic,
-                            lu, resid, True)
+            assemble_system(system, x, x_prev, v_prev, h, f_ext, fixed, LU_TARGET, dynamic, lu,
+                            resid, True)
             st = sparse_lu_factor(lu, diag, low_ptr, low_idx, up_ptr, up_idx, op_ptr, op_t, 1e-13)
             lu_state[1] += 1
             if st != 0:
                 lu_state[0] = 0
                 return STATUS_BAD_PIVOT, it, norm
-            sparse_lu_pack(lu, diag, low_idx, up_idx, packed)
+            sparse_lu_pack(lu, diag, low_idx, up_idx, work.packed)
             lu_state[0] = 1
         prev = norm
         last_fresh = fresh
         for i in range(n):
             rhs[i] = resid[perm[i]]
             x_last[i] = x[i]
-        sparse_lu_substitute(packed, rhs, low_ptr, low_row, up_ptr, up_col)
+        sparse_lu_substitute(work.packed, rhs, low_ptr, low_row, up_ptr, up_col)
         step = 0.0
         for i in range(n):
             dx = rhs[i]
@@ -205,65 +191,89 @@ def newton_direct(x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len,
             x[perm[i]] -= dx
             if abs(dx) > step:
                 step = abs(dx)
-        if fresh and step <= pos_tol:
+        if fresh and step <= solver.pos_tol:
             return STATUS_OK, it + 1, norm
     lu_state[0] = 0
-    return STATUS_MAX_ITER, max_iter, norm
+    return STATUS_MAX_ITER, solver.max_iter, norm
 
 
 @njit(cache=True, error_model='numpy')
-def run_direct(n_steps, t, h, x, v, mass2, edges, rest, ea, bends, bend_len, ei, kappa0, cn, ct,
-               f_ext, fixed, edge_map, bend_map, diag_map, perm, plan, force_tol, pos_tol,
-               max_iter, act_profile, act_young, act_times, act_offsets, act_bend, act_bend_limb,
-               act_bend_sign, act_bend_i, act_edge, act_edge_limb, act_edge_area, act_root,
-               act_root_limb, act_root_sign, act_root_base, act_root_half, act_root_len,
-               act_root_i, lu, rhs, resid, x_prev, v_prev, lu_state, reuse, v_old, packed, bd_mass, bd_ref,
-               bd_coef, f_tot, f_damp, refresh_ratio=0.5):
-    """Advance ``n_steps`` steps of size ``h`` in place (x, v), actuation included.
+def applied_force(system, x, v, f_ext, out):
+    """``out`` = ``f_ext`` plus the forces of every explicit set at (x, v) [N]."""
+    for d in range(x.shape[0]):
+        out[d] = f_ext[d]
+    for es in literal_unroll(system.explicit_sets):
+        add_explicit_set(es, x, v, system.fixed, out)
 
-    The Newton guess extrapolates the velocity linearly, ``x_k + h (2 v_k - v_{k-1})``
-    (``v_old`` holds v_{k-1} and is updated), which saves about one iteration per step.
 
-    ``bd_coef`` = (X_u, Y_v, N_r) of the lumped body damping (all 0: none); ``f_tot``
-    and ``f_damp`` are work arrays (2N,).
+@njit(cache=True, error_model='numpy')
+def begin_step(system, state, work, f_ext, t_new, h):
+    """Start a step to ``t_new``: actuation at ``t_new``, the applied force (explicit terms
+    at the current state) into ``work.f_total``, save (x, v) and set the Newton guess.
+
+    The guess extrapolates the velocity linearly, ``x_k + h (2 v_k - v_{k-1})``, which
+    saves about one iteration per step.
+    """
+    update_actuators(t_new, system.actuator, system.kappa0, system.ei, system.ea)
+    x = state.x
+    v = state.v
+    applied_force(system, x, v, f_ext, work.f_total)
+    fixed = system.fixed
+    for d in range(x.shape[0]):
+        state.x_prev[d] = x[d]
+        state.v_prev[d] = v[d]
+        if not fixed[d]:
+            x[d] = x[d] + h * (2.0 * v[d] - state.v_old[d])
+
+
+@njit(cache=True, error_model='numpy')
+def end_step(system, state, t_new, h):
+    """Accept the converged ``state.x``: velocity ``(x - x_k) / h`` (backward Euler), time."""
+    fixed = system.fixed
+    for d in range(state.x.shape[0]):
+        state.v[d] = (state.x[d] - state.x_prev[d]) / h if not fixed[d] else 0.0
+        state.v_old[d] = state.v_prev[d]
+    state.time[0] = t_new
+
+
+@njit(cache=True, error_model='numpy')
+def undo_step(state):
+    """Back to the state at the start of the step (after a failed Newton solve)."""
+    for d in range(state.x.shape[0]):
+        state.x[d] = state.x_prev[d]
+        state.v[d] = state.v_prev[d]
+
+
+@njit(cache=True, error_model='numpy')
+def step_direct(system, solver, work, state, f_ext, t_new, h, reuse):
+    """One backward-Euler step to ``t_new`` with the numba sparse LU (the step of both the
+    fast and the step-halving paths). On failure the state is left at the last Newton
+    iterate (the caller undoes the step or continues with SuperLU).
+    Returns (status, iterations, residual norm)."""
+    begin_step(system, state, work, f_ext, t_new, h)
+    status, iters, norm = newton_direct(system, solver, work, state.x, state.x_prev, state.v_prev,
+                                        work.f_total, h, True, reuse)
+    if status == STATUS_OK:
+        end_step(system, state, t_new, h)
+    return status, iters, norm
+
+
+@njit(cache=True, error_model='numpy')
+def run_direct(system, solver, work, state, f_ext, t, h, n_steps, reuse):
+    """Advance ``n_steps`` steps of size ``h`` from time ``t`` in place (state.x, state.v).
 
     Returns (steps done, status of the failing step or 0, total Newton iterations,
     last residual norm). On failure x, v hold the state before the failing step.
     """
-    n = x.shape[0]
     total_iter = 0
     norm = 0.0
-    damp = bd_coef[0] != 0.0 or bd_coef[1] != 0.0 or bd_coef[2] != 0.0
-    for d in range(n):
-        f_tot[d] = f_ext[d]
     for k in range(n_steps):
-        t_new = t + (k + 1) * h
-        apply_actuation(t_new, act_profile, act_young, act_times, act_offsets, act_bend,
-                        act_bend_limb, act_bend_sign, act_bend_i, act_edge, act_edge_limb,
-                        act_edge_area, act_root, act_root_limb, act_root_sign, act_root_base,
-                        act_root_half, act_root_len, act_root_i, kappa0, ei, ea)
-        if damp:
-            body_damping_force(x, v, bd_mass, bd_ref, bd_coef[0], bd_coef[1], bd_coef[2], f_damp)
-            for d in range(n):
-                f_tot[d] = f_ext[d] + (0.0 if fixed[d] else f_damp[d])
-        for d in range(n):
-            x_prev[d] = x[d]
-            v_prev[d] = v[d]
-            if not fixed[d]:
-                x[d] = x[d] + h * (2.0 * v[d] - v_old[d])
-        status, iters, norm = newton_direct(
-            x, x_prev, v_prev, h, mass2, edges, rest, ea, bends, bend_len, ei, kappa0, cn, ct,
-            f_tot, fixed, edge_map, bend_map, diag_map, perm, plan, True, force_tol, pos_tol,
-            max_iter, lu, rhs, resid, lu_state, reuse, packed, refresh_ratio)
+        status, iters, norm = step_direct(system, solver, work, state, f_ext, t + (k + 1) * h, h,
+                                          reuse)
         total_iter += iters
-        if status != 0:
-            for d in range(n):
-                x[d] = x_prev[d]
-                v[d] = v_prev[d]
+        if status != STATUS_OK:
+            undo_step(state)
             return k, status, total_iter, norm
-        for d in range(n):
-            v[d] = (x[d] - x_prev[d]) / h if not fixed[d] else 0.0
-            v_old[d] = v_prev[d]
     return n_steps, 0, total_iter, norm
 
 
@@ -353,26 +363,32 @@ class ImplicitEulerIntegrator:
         self.pattern = build_jacobian_pattern(network.n_nodes, network.edges, network.bends)
         n = network.n_dof
         plan = self.pattern.lu_plan
-        self._lu = np.zeros(plan.nnz + 1)            # last entry: trash slot of fixed DOFs
-        self._packed = np.zeros(plan.low_idx.size + plan.up_idx.size + plan.n)
-        self._csr_data = np.zeros(self.pattern.nnz + 1)
-        self._maps_lu = self._masked_maps(self.pattern.edge_map_lu, self.pattern.bend_map_lu,
-                                          self.pattern.diag_map_lu, plan.nnz)
-        self._maps_csr = self._masked_maps(self.pattern.edge_map_csr, self.pattern.bend_map_csr,
-                                           self.pattern.diag_map_csr, self.pattern.nnz)
-        self._plan = (plan.diag, plan.low_ptr, plan.low_row, plan.low_idx, plan.up_ptr,
-                      plan.up_col, plan.up_idx, plan.op_ptr, plan.op_target)
         self.reuse_jacobian = bool(reuse_jacobian)
         self.refresh_ratio = 0.5    # refresh the Jacobian when |F| contracts less than 2x
-        self._lu_state = np.zeros(2, dtype=np.int64)   # [factors valid, factorisations]
+        self._work = Workspace(lu=np.zeros(plan.nnz + 1),            # last entry: trash slot of fixed DOFs
+                               packed=np.zeros(plan.low_idx.size + plan.up_idx.size + plan.n),
+                               rhs=np.zeros(n), resid=np.zeros(n), x_last=np.zeros(n),
+                               f_total=np.zeros(n), lu_state=np.zeros(2, dtype=np.int64))
+        self._lu_state = self._work.lu_state   # [factors valid, factorisations]
+        self._resid = self._work.resid
         self._lu_h = None
-        self._rhs = np.zeros(n)
-        self._resid = np.zeros(n)
-        self._x_prev = np.zeros(n)
-        self._v_prev = np.zeros(n)
+        self._csr_data = np.zeros(self.pattern.nnz + 1)
+        self._plan = (plan.diag, plan.low_ptr, plan.low_row, plan.low_idx, plan.up_ptr,
+                      plan.up_col, plan.up_idx, plan.op_ptr, plan.op_target)
+        pat = self.pattern
+        # DOF maps of the element sets and their Jacobian scatter maps (fixed DOFs -> trash)
+        self._edge_dofs = np.repeat(2 * network.edges, 2, axis=1) + np.tile([0, 1], 2)
+        self._bend_dofs = np.repeat(2 * network.bends, 2, axis=1) + np.tile([0, 1], 3)
+        self._edge_maps = scatter_maps(self._edge_dofs, self.fixed, pat.edge_map_csr, pat.edge_map_lu,
+                                       plan.nnz, pat.nnz)
+        self._bend_maps = scatter_maps(self._bend_dofs, self.fixed, pat.bend_map_csr, pat.bend_map_lu,
+                                       plan.nnz, pat.nnz)
+        self._diag_maps = np.stack([pat.diag_map_lu, pat.diag_map_csr]).astype(np.int32)
+        self._all_dofs = np.arange(n, dtype=np.int64).reshape(1, n)
         self.kappa0 = network.bend_natural_curvature.copy()
         self.ei = network.bend_stiffness.copy()
         self.ea = network.edge_stretching_stiffness.copy()
+        self._bend_work = np.empty((3, 4, 4))
         self.external_force = np.zeros(n)
         coef = np.asarray(body_damping, dtype=float)
         if coef.shape != (3,) or not np.all(np.isfinite(coef)) or np.any(coef < 0):
@@ -384,27 +400,72 @@ class ImplicitEulerIntegrator:
         self.reference = np.ascontiguousarray(reference, dtype=float)
         if self.reference.shape != (network.n_nodes, 2):
             raise ValueError(f'reference has shape {self.reference.shape}, expected ({network.n_nodes}, 2)')
-        self._f_tot = np.zeros(n)
-        self._f_damp = np.zeros(n)
-        self.x = network.positions.reshape(-1).astype(float).copy()
-        self.v = np.zeros(n)
-        self._v_old = np.zeros(n)      # velocity of the previous step (predictor)
-        self.time = 0.0
+        self._state = State(x=network.positions.reshape(-1).astype(float).copy(), v=np.zeros(n),
+                            x_prev=np.zeros(n), v_prev=np.zeros(n),
+                            v_old=np.zeros(n),      # velocity of the previous step (predictor)
+                            time=np.zeros(1))
         self.stats = StepStatistics()
         self.update_actuation(self.time)
 
-    def _masked_maps(self, edge_map, bend_map, diag_map, trash):
-        """Copies of the element maps with rows/columns of fixed DOFs sent to ``trash``."""
+    # ------------------------------------------------------------------ force/energy terms
+    def _element_sets(self):
+        """The implicit element sets (inside Newton, eq. 6-8), in assembly order.
+
+        * edges (4 DOFs each): stretching energy E_s (``StretchTerm``: dl, EA) and the
+          quadratic drag of eq. 1-2 (``DragTerm``: 1/2 rho C D dl normal / tangent);
+        * bends (6 DOFs each): bending energy E_b (``BendTerm``: dl, EI, kappa0).
+
+        A new implicit term is one more record here (on an existing DOF map, or a new
+        :class:`~frog_sim.core.element_sets.ElementSet` whose couplings are in the pattern).
+        """
         net = self.network
-        edof = np.repeat(2 * net.edges, 2, axis=1) + np.tile([0, 1], 2)
-        bdof = np.repeat(2 * net.bends, 2, axis=1) + np.tile([0, 1], 3)
-        em = edge_map.astype(np.int32)
-        bm = bend_map.astype(np.int32)
-        fe = self.fixed[edof]
-        fb = self.fixed[bdof]
-        em[fe[:, :, None] | fe[:, None, :]] = trash
-        bm[fb[:, :, None] | fb[:, None, :]] = trash
-        return em, bm, diag_map.astype(np.int32)
+        return (ElementSet(self._edge_dofs, self._edge_maps,
+                           (StretchTerm(net.edge_rest_length, self.ea), DragTerm(self.cn, self.ct))),
+                ElementSet(self._bend_dofs, self._bend_maps,
+                           (BendTerm(net.bend_length, self.ei, self.kappa0, self._bend_work),)))
+
+    def _explicit_sets(self):
+        """The explicit (lagged) element sets, evaluated at the start of each step and added
+        to ``external_force``: the lumped body damping (``BodyDampingTerm``, one element on
+        all DOFs; off while its coefficients are zero)."""
+        return (ExplicitSet(self._all_dofs, (BodyDampingTerm(self.mass, self.reference, self.body_damping),)),)
+
+    def _system(self):
+        """The current :class:`System` (rebuilt per call: picks up rebound attributes)."""
+        return System(self.mass2, self.fixed, self._diag_maps, self._element_sets(),
+                      self._explicit_sets(), self.actuator.as_tuple(), self.kappa0, self.ei, self.ea)
+
+    def _solver(self):
+        return Solver(self.pattern.lu_plan.perm, self._plan, self.force_tolerance,
+                      self.position_tolerance, self.max_iterations, self.refresh_ratio)
+
+    # ------------------------------------------------------------------ state
+    @property
+    def x(self) -> np.ndarray:
+        """Positions (2N,) [m], ordered x0, y0, x1, y1, ..."""
+        return self._state.x
+
+    @x.setter
+    def x(self, value):
+        self._state.x[:] = value
+
+    @property
+    def v(self) -> np.ndarray:
+        """Velocities (2N,) [m/s]."""
+        return self._state.v
+
+    @v.setter
+    def v(self, value):
+        self._state.v[:] = value
+
+    @property
+    def time(self) -> float:
+        """[s]"""
+        return float(self._state.time[0])
+
+    @time.setter
+    def time(self, value):
+        self._state.time[0] = value
 
     def set_state(self, x=None, v=None) -> None:
         """Overwrite positions (2N,) [m] and/or velocities (2N,) [m/s]; resets the predictor."""
@@ -418,7 +479,7 @@ class ImplicitEulerIntegrator:
             if v.shape != self.v.shape or not np.all(np.isfinite(v)):
                 raise ValueError(f'v must be {self.v.size} finite values')
             self.v[:] = v
-        self._v_old[:] = self.v
+        self._state.v_old[:] = self.v
         self._lu_state[0] = 0
 
     @property
@@ -429,29 +490,22 @@ class ImplicitEulerIntegrator:
     # ------------------------------------------------------------------ helpers
     def update_actuation(self, t: float) -> None:
         """Set natural curvature and stiffness of actuated elements for time ``t``."""
-        apply_actuation(float(t), *self.actuator.as_tuple(), self.kappa0, self.ei, self.ea)
+        update_actuators(float(t), self.actuator.as_tuple(), self.kappa0, self.ei, self.ea)
 
     def applied_force(self) -> np.ndarray:
-        """Force of the next step, held over it [N]: ``external_force`` plus the body damping
-        at the current state."""
-        if not np.any(self.body_damping):
-            return self.external_force
-        body_damping_force(self.x, self.v, self.mass, self.reference, *self.body_damping, self._f_damp)
-        return self.external_force + np.where(self.fixed, 0.0, self._f_damp)
+        """Force of the next step, held over it [N]: ``external_force`` plus the explicit
+        terms (body damping) at the current state."""
+        out = np.empty_like(self.external_force)
+        applied_force(self._system(), self.x, self.v, self.external_force, out)
+        return out
 
-    def _assemble(self, x, x_prev, v_prev, h, dynamic, data, edge_map, bend_map, diag_map, f_ext=None):
-        return assemble_system(x, x_prev, v_prev, h, self.mass2, self.network.edges,
-                               self.network.edge_rest_length, self.ea, self.network.bends,
-                               self.network.bend_length, self.ei, self.kappa0, self.cn, self.ct,
-                               self.external_force if f_ext is None else f_ext, self.fixed, edge_map,
-                               bend_map, diag_map, dynamic, data, self._resid)
-
-    def _newton_sparse(self, x, x_prev, v_prev, h, dynamic, f_ext):
+    def _newton_sparse(self, system, x, x_prev, v_prev, h, dynamic, f_ext):
         """Newton with SuperLU on the CSR Jacobian (robust path)."""
         pat = self.pattern
         norm = np.inf
         for it in range(self.max_iterations):
-            norm = self._assemble(x, x_prev, v_prev, h, dynamic, self._csr_data, *self._maps_csr, f_ext=f_ext)
+            norm = assemble_system(system, x, x_prev, v_prev, h, f_ext, self.fixed, CSR_TARGET, dynamic,
+                                   self._csr_data, self._resid)
             if not np.isfinite(norm):
                 return STATUS_NOT_FINITE, it, norm
             if norm <= self.force_tolerance:
@@ -467,41 +521,54 @@ class ImplicitEulerIntegrator:
                 return STATUS_OK, it + 1, norm
         return STATUS_MAX_ITER, self.max_iterations, norm
 
+    def _direct_reuse(self, h, dynamic):
+        """Whether the numba Newton may keep its LU factors (same h, dynamic problem)."""
+        reuse = self.reuse_jacobian and dynamic
+        if not reuse or self._lu_h != h:
+            self._lu_state[0] = 0
+        self._lu_h = h if reuse else None
+        return reuse
+
     def _newton(self, x, x_prev, v_prev, h, dynamic, solver, f_ext=None):
-        pat = self.pattern
         f_ext = self.external_force if f_ext is None else f_ext
+        system = self._system()
         if solver == 'direct':
-            reuse = self.reuse_jacobian and dynamic
-            if not reuse or self._lu_h != h:
-                self._lu_state[0] = 0
-            self._lu_h = h if reuse else None
-            status, iters, norm = newton_direct(
-                x, x_prev, v_prev, h, self.mass2, self.network.edges,
-                self.network.edge_rest_length, self.ea, self.network.bends,
-                self.network.bend_length, self.ei, self.kappa0, self.cn, self.ct,
-                f_ext, self.fixed, *self._maps_lu, pat.lu_plan.perm, self._plan,
-                dynamic, self.force_tolerance,
-                self.position_tolerance, self.max_iterations, self._lu, self._rhs, self._resid,
-                self._lu_state, reuse, self._packed, self.refresh_ratio)
+            reuse = self._direct_reuse(h, dynamic)
+            status, iters, norm = newton_direct(system, self._solver(), self._work, x, x_prev, v_prev,
+                                                f_ext, h, dynamic, reuse)
             if status != STATUS_BAD_PIVOT:
                 return status, iters, norm
             self.stats.sparse_fallbacks += 1
-        return self._newton_sparse(x, x_prev, v_prev, h, dynamic, f_ext)
+        return self._newton_sparse(system, x, x_prev, v_prev, h, dynamic, f_ext)
 
     def _single_step(self, h, solver):
-        """One backward-Euler step of size h from (x, v, time); returns (status, iters, norm)."""
+        """One backward-Euler step of size h from (x, v, time); returns (status, iters, norm).
+
+        The numba step of :meth:`advance` (:func:`step_direct`); with SuperLU (or after a
+        bad pivot) the same :func:`begin_step` / :func:`end_step` around SuperLU Newton."""
         t_new = self.time + h
-        self.update_actuation(t_new)
-        f_ext = self.applied_force()
-        x_prev = self.x.copy()
-        v_prev = self.v.copy()
-        x = x_prev + np.where(self.fixed, 0.0, h * (2.0 * v_prev - self._v_old))
-        status, iters, norm = self._newton(x, x_prev, v_prev, h, True, solver, f_ext)
+        system = self._system()
+        st = self._state
+        if solver == 'direct':
+            reuse = self._direct_reuse(h, True)
+            status, iters, norm = step_direct(system, self._solver(), self._work, st,
+                                              self.external_force, t_new, h, reuse)
+            if status == STATUS_BAD_PIVOT:
+                self.stats.sparse_fallbacks += 1
+                status, iters, norm = self._newton_sparse(system, st.x, st.x_prev, st.v_prev, h, True,
+                                                          self._work.f_total)
+                if status == STATUS_OK:
+                    end_step(system, st, t_new, h)
+        else:
+            begin_step(system, st, self._work, self.external_force, t_new, h)
+            status, iters, norm = self._newton_sparse(system, st.x, st.x_prev, st.v_prev, h, True,
+                                                      self._work.f_total)
+            if status == STATUS_OK:
+                end_step(system, st, t_new, h)
         if status == STATUS_OK:
-            self.x = x
-            self.v = np.where(self.fixed, 0.0, (x - x_prev) / h)
-            self._v_old = v_prev
             self.time = t_new
+        else:
+            undo_step(st)
         return status, iters, norm
 
     def _robust_step(self, h, depth=0):
@@ -564,8 +631,8 @@ class ImplicitEulerIntegrator:
             for _ in range(n_steps):
                 self.step(h)
             return
-        pat = self.pattern
-        act = self.actuator.as_tuple()
+        system = self._system()
+        solver = self._solver()
         if not self.reuse_jacobian or self._lu_h != h:
             self._lu_state[0] = 0
         self._lu_h = h if self.reuse_jacobian else None
@@ -573,16 +640,9 @@ class ImplicitEulerIntegrator:
         t0 = self.time
         done_total = 0
         while remaining > 0:
-            done, status, iters, norm = run_direct(
-                remaining, t0 + done_total * h, h, self.x, self.v,
-                self.mass2, self.network.edges, self.network.edge_rest_length, self.ea,
-                self.network.bends, self.network.bend_length, self.ei, self.kappa0, self.cn,
-                self.ct, self.external_force, self.fixed, *self._maps_lu, pat.lu_plan.perm,
-                self._plan, self.force_tolerance,
-                self.position_tolerance, self.max_iterations, *act, self._lu, self._rhs,
-                self._resid, self._x_prev, self._v_prev, self._lu_state, self.reuse_jacobian,
-                self._v_old, self._packed, self.mass, self.reference, self.body_damping, self._f_tot,
-                self._f_damp, self.refresh_ratio)
+            done, status, iters, norm = run_direct(system, solver, self._work, self._state,
+                                                   self.external_force, t0 + done_total * h, h,
+                                                   remaining, self.reuse_jacobian)
             self.stats.newton_iterations += iters
             self.stats.last_residual = norm
             self.stats.steps += done
@@ -638,13 +698,6 @@ class ImplicitEulerIntegrator:
         """Elastic force ``-dE/dx`` (2N,) [N] at ``x`` (default: current state)."""
         x = self.x if x is None else np.ascontiguousarray(x, dtype=float)
         data = np.zeros(self.pattern.nnz + 1)
-        saved = self.external_force
-        self.external_force = np.zeros_like(saved)
-        fixed = self.fixed
-        self.fixed = np.zeros_like(fixed)
-        try:
-            self._assemble(x, x, self.v, 1.0, False, data, *self._maps_csr)
-        finally:
-            self.external_force = saved
-            self.fixed = fixed
+        assemble_system(self._system(), x, x, self.v, 1.0, np.zeros_like(self.external_force),
+                        np.zeros_like(self.fixed), CSR_TARGET, False, data, self._resid)
         return -self._resid.copy()
