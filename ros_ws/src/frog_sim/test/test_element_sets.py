@@ -6,45 +6,14 @@ from outside the integrator (explicit: a constant nodal force, which must equal 
 same ``external_force`` exactly; implicit: springs tying each node to its rest position,
 whose static solution under a uniform load is the hand-computed F / k).
 """
-from collections import namedtuple
-
 import numpy as np
-from numba import njit
 
 from frog_sim.core.body_damping import body_damping
-from frog_sim.core.element_sets import (ElementSet, ExplicitSet, element_set_maps, register_explicit_term,
-                                        register_implicit_term)
+from frog_sim.core.element_sets import ElementSet, ExplicitSet, element_set_maps
+from frog_sim.core.extra_terms import NodalForceTerm, TetherTerm
 from frog_sim.core.integrator import ImplicitEulerIntegrator
 from frog_sim.core.reference_numpy import NumpyReferenceStepper
 from frog_sim.core.rod_network import RodNetworkBuilder
-
-# ----------------------------------------------------------------- test terms
-ConstantForceTerm = namedtuple('ConstantForceTerm', 'force')
-
-
-@njit(cache=True)
-def _constant_force(term, m, xe, ve, force):
-    for p in range(xe.shape[0]):
-        force[p] = term.force[m, p]
-    return True
-
-
-register_explicit_term(ConstantForceTerm, _constant_force)
-
-AnchorSpringTerm = namedtuple('AnchorSpringTerm', 'anchor stiffness')
-
-
-@njit(cache=True)
-def _anchor_spring(term, m, xe, ve, grad, hess, dgdv, want_jac):
-    for p in range(2):
-        grad[p] = term.stiffness * (xe[p] - term.anchor[m, p])   # dE/dx of k |x - x0|^2 / 2
-        if want_jac:
-            for q in range(2):
-                hess[p, q] = term.stiffness if p == q else 0.0
-
-
-register_implicit_term(AnchorSpringTerm, _anchor_spring)
-
 
 def _rod(n=6):
     b = RodNetworkBuilder()
@@ -106,7 +75,7 @@ class _WithTerms(ImplicitEulerIntegrator):
         if self.extra_force is None:
             return sets
         dofs = np.arange(self.x.size).reshape(-1, 2)
-        return sets + (ExplicitSet(dofs, (ConstantForceTerm(self.extra_force.reshape(-1, 2)),)),)
+        return sets + (ExplicitSet(dofs, (NodalForceTerm(self.extra_force.reshape(-1, 2)),)),)
 
     def _element_sets(self):
         sets = super()._element_sets()
@@ -115,7 +84,8 @@ class _WithTerms(ImplicitEulerIntegrator):
         dofs = np.arange(self.x.size).reshape(-1, 2)
         maps = element_set_maps(self.pattern, dofs, self.fixed)
         anchor = self.network.positions.astype(float)
-        return sets + (ElementSet(dofs, maps, (AnchorSpringTerm(anchor, self.spring),)),)
+        stiffness = np.full(self.network.n_nodes, float(self.spring))
+        return sets + (ElementSet(dofs, maps, (TetherTerm(anchor, stiffness),)),)
 
 
 def test_a_registered_explicit_term_equals_the_same_external_force():

@@ -65,7 +65,9 @@ def register_implicit_term(term_class, kernel, velocity_dependent=False):
     Parameters
     ----------
     term_class : namedtuple class
-        The term record (module-level, so that numba caches the compiled code).
+        The term record, defined at module level in an importable module (numba's cache
+        index of the integrator pickles the term types: a class from a script or a test
+        file would break loading that cache in other processes).
     kernel : numba dispatcher
         ``kernel(term, m, xe, ve, grad, hess, dgdv, want_jac)``, see the module docstring.
     velocity_dependent : bool
