@@ -125,7 +125,7 @@ touches every DOF (DOF map ``arange(2N)``): nodal masses (N,) [kg], the referenc
 (N, 2) [m] and (X_u, Y_v, N_r) (3,); all-zero coefficients switch it off."""
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, inline='always', error_model='numpy')
 def body_damping_term(term, m, xe, ve, force):
     """Explicit-term kernel of :class:`BodyDampingTerm`: the force at the start of the step."""
     c = term.coefficients

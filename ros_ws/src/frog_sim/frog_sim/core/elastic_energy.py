@@ -178,14 +178,14 @@ Voronoi lengths dl (B,) [m], EI (B,) [N m^2], kappa0 (B,) [1/m] (live arrays of 
 actuation) and a scratch array (3, 4, 4)."""
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, inline='always', error_model='numpy')
 def stretch_term(term, m, xe, ve, grad, hess, dgdv, want_jac):
     """Implicit-term kernel of :class:`StretchTerm` (gradient and Hessian of E_s, eq. 8)."""
     stretch_element(xe[0], xe[1], xe[2], xe[3], term.rest_length[m], term.stiffness[m], grad, hess,
                     want_jac)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, inline='always', error_model='numpy')
 def bend_term(term, m, xe, ve, grad, hess, dgdv, want_jac):
     """Implicit-term kernel of :class:`BendTerm` (gradient and Hessian of E_b, eq. 8)."""
     bend_element(xe[0], xe[1], xe[2], xe[3], xe[4], xe[5], term.length[m], term.stiffness[m],

@@ -57,6 +57,9 @@ forces are evaluated at the start of each step and added to the applied force.""
 
 _IMPLICIT_KERNELS = {}   # term class -> (kernel, velocity dependent)
 _EXPLICIT_KERNELS = {}   # term class -> kernel
+# The dispatch to a term's kernel is inlined and prefers literal arguments: the residual-only
+# assembly (``want_jac`` = literal False) then compiles kernels without their Hessian code.
+_JIT_OPTIONS = {'cache': True, 'error_model': 'numpy'}
 
 
 def register_implicit_term(term_class, kernel, velocity_dependent=False):
@@ -88,11 +91,11 @@ def register_explicit_term(term_class, kernel):
 
 
 def _implicit_contribution(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl, hl):
-    """Add term ``term`` of element ``m`` to the element's residual ``gl`` and Jacobian ``hl``."""
+    """Add term ``term`` of element ``m`` to the element residuals ``gl[m]`` and Jacobians ``hl[m]``."""
     raise NotImplementedError  # numba only (overloaded below per term class)
 
 
-@overload(_implicit_contribution, jit_options={'cache': True, 'error_model': 'numpy'})
+@overload(_implicit_contribution, inline='always', prefer_literal=True, jit_options=_JIT_OPTIONS)
 def _overload_implicit(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl, hl):
     cls = getattr(term, 'instance_class', None)
     if cls not in _IMPLICIT_KERNELS:
@@ -105,19 +108,19 @@ def _overload_implicit(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl,
             kernel(term, m, xe, ve, g, hm, dv, want_jac)
             k = xe.shape[0]
             for p in range(k):
-                gl[p] += g[p]
+                gl[m, p] += g[p]
                 if want_jac:
                     for q in range(k):
-                        hl[p, q] += hm[p, q] + dv[p, q] * inv_h
+                        hl[m, p, q] += hm[p, q] + dv[p, q] * inv_h
     else:
         def impl(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl, hl):
             kernel(term, m, xe, ve, g, hm, dv, want_jac)
             k = xe.shape[0]
             for p in range(k):
-                gl[p] += g[p]
+                gl[m, p] += g[p]
                 if want_jac:
                     for q in range(k):
-                        hl[p, q] += hm[p, q]
+                        hl[m, p, q] += hm[p, q]
     return impl
 
 
@@ -126,7 +129,7 @@ def _explicit_contribution(term, m, xe, ve, force):
     raise NotImplementedError  # numba only
 
 
-@overload(_explicit_contribution, jit_options={'cache': True, 'error_model': 'numpy'})
+@overload(_explicit_contribution, inline='always', prefer_literal=True, jit_options=_JIT_OPTIONS)
 def _overload_explicit(term, m, xe, ve, force):
     cls = getattr(term, 'instance_class', None)
     if cls not in _EXPLICIT_KERNELS:
@@ -143,36 +146,35 @@ def assemble_element_set(es, target, x, x_prev, inv_h, dynamic, resid, data, wan
     """Add the residual (eq. 6) and Jacobian (eq. 8) entries of one element set.
 
     ``target`` 0 scatters into the LU value array, 1 into the CSR one (``data``);
-    ``resid`` (2N,) is accumulated.
+    ``resid`` (2N,) is accumulated. Each element's terms are summed in their order
+    before the element is scattered (elements in order).
     """
     dofs = es.dofs
+    n_el = dofs.shape[0]
     k = dofs.shape[1]
     jmap = es.jac_maps[target]
     xe = np.empty(k)
     ve = np.zeros(k)
     g = np.empty(k)
-    gl = np.empty(k)
     hm = np.zeros((k, k))
     dv = np.zeros((k, k))
-    hl = np.zeros((k, k))
-    for m in range(dofs.shape[0]):
-        for p in range(k):
-            d = dofs[m, p]
-            xe[p] = x[d]
-            if dynamic:
-                ve[p] = (x[d] - x_prev[d]) * inv_h
-            gl[p] = 0.0
-            if want_jac:
-                for q in range(k):
-                    hl[p, q] = 0.0
-        for term in literal_unroll(es.terms):
+    gl = np.zeros((n_el, k))
+    hl = np.zeros((n_el if want_jac else 0, k, k))
+    for term in literal_unroll(es.terms):
+        for m in range(n_el):
+            for p in range(k):
+                d = dofs[m, p]
+                xe[p] = x[d]
+                if dynamic:
+                    ve[p] = (x[d] - x_prev[d]) * inv_h
             _implicit_contribution(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl, hl)
+    for m in range(n_el):
         for p in range(k):
-            resid[dofs[m, p]] += gl[p]
+            resid[dofs[m, p]] += gl[m, p]
         if want_jac:
             for p in range(k):
                 for q in range(k):
-                    data[jmap[m, p, q]] += hl[p, q]
+                    data[jmap[m, p, q]] += hl[m, p, q]
 
 
 @njit(cache=True, error_model='numpy')

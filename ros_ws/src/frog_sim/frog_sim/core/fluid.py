@@ -167,7 +167,7 @@ DragTerm.__doc__ = """Quadratic drag of eq. 1-2 on the edges (an element = the 4
 prefactors 1/2 rho_f C D dl for the normal and tangent directions (E,) [kg/m]."""
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, inline='always', error_model='numpy')
 def drag_term(term, m, xe, ve, grad, hess, dgdv, want_jac):
     """Implicit-term kernel of :class:`DragTerm`: ``-f_d``, ``-df_d/dx``, ``-df_d/dv`` (eq. 6, 8)."""
     drag_element(xe[0], xe[1], xe[2], xe[3], ve[0], ve[1], ve[2], ve[3], term.normal[m],

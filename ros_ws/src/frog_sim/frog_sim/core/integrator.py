@@ -8,8 +8,13 @@ Jacobian (eq. 8)::
 
     J = M / h^2 + d2E/dx2 - df_d/dx - (1/h) df_d/dv
 
-``f_ext`` holds the constant applied force plus the lumped rigid-body damping of
-:mod:`~frog_sim.core.body_damping`, evaluated at the start of each step (explicit).
+The energy and force terms are element sets (:mod:`~frog_sim.core.element_sets`): a DOF
+map plus a numba kernel per term, listed in ``ImplicitEulerIntegrator._element_sets``
+(implicit, inside Newton: stretching E_s and drag f_d on the edges, bending E_b on the
+bend triples) and ``ImplicitEulerIntegrator._explicit_sets`` (lagged: the lumped
+rigid-body damping of :mod:`~frog_sim.core.body_damping`, evaluated at the start of each
+step and added to ``f_ext``, the constant applied force). The inertia term (lumped
+masses M of eq. 4) belongs to the step itself.
 
 Newton (eq. 7) iterates ``x <- x - J \\ F`` from the predictor ``x_k + h v_k`` until
 ``max|F| <= force_tolerance`` or ``max|dx| <= position_tolerance``; at most
@@ -18,9 +23,16 @@ retried as two half steps, recursively up to ``max_halvings`` times; if that fai
 :class:`ConvergenceError` names the time, step size and residual. A step never
 returns NaN or an unconverged state.
 
-The whole loop (actuation update, assembly, sparse LU, Newton, state update) runs in
-numba for speed; a SuperLU (scipy.sparse CSR) path is used when the pivot test of the
-unpivoted numba sparse LU fails, or on request (``solver='superlu'``).
+The whole loop (actuation update, explicit terms, assembly, sparse LU, Newton, state
+update) runs in numba on four packed arguments: the :class:`System` (masses, fixed DOFs,
+element sets, actuator arrays), the :class:`Solver` (LU plan, tolerances), the
+:class:`Workspace` (LU values, right-hand side, residual, work arrays) and the
+:class:`State` (x, v, start of the step, predictor, time). :func:`step_direct` is the
+one step: :func:`run_direct` (the fast path of ``advance``) loops over it and the
+step-halving path (``step``) calls it per (sub-)step. A SuperLU (scipy.sparse CSR) path is
+used when the pivot test of the unpivoted numba sparse LU fails, or on request
+(``solver='superlu``); it runs the same :func:`begin_step`, :func:`assemble_system` and
+:func:`end_step` around SuperLU.
 """
 from __future__ import annotations
 
