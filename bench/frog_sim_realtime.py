@@ -13,6 +13,16 @@ and from the CPU time of the process (``time.process_time``): on a shared machin
 CPU-time figure is the one-core cost, the wall-time figure includes waiting for the CPU.
 
 Run: ``./dev bench frog_sim_realtime`` (or ``./dev run python bench/frog_sim_realtime.py``).
+
+``--compare-ref REF`` (e.g. ``main``) instead measures the library path of this tree against
+the one of git revision REF in the same run: each measurement is a fresh subprocess whose
+``PYTHONPATH`` starts with the ``frog_sim`` source tree of one side (REF's is exported with
+``git archive`` into ``~/.cache/frog_sim/bench_trees/<sha>``, or given by ``--ref-tree``),
+both sides alternate (ABBA), each subprocess warms up (numba cache load or compile) before
+its timed run, and both read the same measurements (``FROG_DATA_DIR``). It prints the median
+CPU-time and wall-time real-time factors of each side, their ratio (this / REF; >= 1: this
+tree is not slower), the median of the per-pair ratios, and the largest difference of the
+two sides' final states.
 """
 from __future__ import annotations
 
@@ -22,9 +32,15 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS', 'NUMB
     os.environ.setdefault(_var, '1')
 
 import argparse  # noqa: E402
+import io  # noqa: E402
+import json  # noqa: E402
 import resource  # noqa: E402
 import statistics  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tarfile  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -39,13 +55,133 @@ def pin_to_one_core() -> str:
         return 'not pinned (sched_setaffinity unavailable)'
 
 
+REPO = Path(__file__).resolve().parents[1]
+PACKAGE_DIR = 'ros_ws/src/frog_sim'      # the frog_sim source tree inside the repository
+
+
+def measure_once(sim_seconds: float, damped: bool = True) -> dict:
+    """One timed library run of the bench's gait in this process, after a warm-up."""
+    from frog_sim.core.actuation import ActuationLibrary
+    from frog_sim.core.model_parameters import FrogParameters
+    from frog_sim.core.simulation import DEFAULT_TIME_STEP, FrogSimulation
+    lib = ActuationLibrary.load()
+    params = FrogParameters()
+    if not damped:
+        params = params.replace(surge_damping_linear=0.0, sway_damping_linear=0.0, yaw_damping_linear=0.0)
+    t0 = time.perf_counter()
+    warm = FrogSimulation(params, library=lib)
+    warm.set_gait(1.0, 0.5)
+    warm.step(10)
+    warm_s = time.perf_counter() - t0
+    sim = FrogSimulation(params, library=lib)
+    sim.set_gait(1.0, 0.5)
+    n_steps = int(round(sim_seconds / DEFAULT_TIME_STEP))
+    t0, c0 = time.perf_counter(), time.process_time()
+    sim.step(n_steps)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    import frog_sim
+    return {'rtf_wall': sim_seconds / wall, 'rtf_cpu': sim_seconds / cpu, 'warm_s': warm_s,
+            'iters': sim.integrator.stats.newton_iterations / n_steps,
+            'facts': sim.integrator.factorizations / n_steps,
+            'x': sim.integrator.x.tolist(), 'source': str(Path(frog_sim.__file__).resolve().parent)}
+
+
+def export_tree(ref: str) -> tuple[Path, str]:
+    """``frog_sim`` source tree of git revision ``ref`` (exported once per commit); (tree, sha)."""
+    sha = subprocess.run(['git', '-C', str(REPO), 'rev-parse', '--verify', f'{ref}^{{commit}}'], check=True,
+                         capture_output=True, text=True).stdout.strip()
+    root = Path(os.environ.get('FROG_SIM_CACHE_DIR', Path.home() / '.cache' / 'frog_sim')) / 'bench_trees' / sha
+    if not (root / PACKAGE_DIR / 'frog_sim' / '__init__.py').is_file():
+        root.mkdir(parents=True, exist_ok=True)
+        archive = subprocess.run(['git', '-C', str(REPO), 'archive', '--format=tar', sha, PACKAGE_DIR],
+                                 check=True, capture_output=True).stdout
+        with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+            tar.extractall(root, filter='data')
+    return root / PACKAGE_DIR, sha
+
+
+def run_worker(tree: Path, sim_seconds: float, damped: bool) -> dict:
+    """:func:`measure_once` in a fresh subprocess importing ``frog_sim`` from ``tree``."""
+    from frog_sim.core.actuation import find_data_dir
+    env = dict(os.environ)
+    env['PYTHONPATH'] = os.pathsep.join([str(tree)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p])
+    env.setdefault('FROG_DATA_DIR', str(find_data_dir()))
+    cmd = [sys.executable, str(Path(__file__).resolve()), '--worker', '--sim-seconds', str(sim_seconds)]
+    if not damped:
+        cmd.append('--undamped')
+    out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
+    result = json.loads(out.strip().splitlines()[-1])
+    if Path(result['source']) != (tree / 'frog_sim').resolve():
+        raise RuntimeError(f'the worker imported frog_sim from {result["source"]}, expected {tree}')
+    return result
+
+
+def compare(args) -> None:
+    """This tree against git revision ``args.compare_ref``, alternating subprocesses (ABBA)."""
+    pin = pin_to_one_core()      # inherited by the workers
+    if args.ref_tree:
+        ref_tree, ref_name = Path(args.ref_tree).resolve() / PACKAGE_DIR, f'{args.compare_ref} at {args.ref_tree}'
+    else:
+        ref_tree, sha = export_tree(args.compare_ref)
+        ref_name = f'{args.compare_ref} ({sha[:8]})'
+    head = subprocess.run(['git', '-C', str(REPO), 'describe', '--always', '--dirty'], capture_output=True,
+                          text=True).stdout.strip()
+    this_tree = REPO / PACKAGE_DIR
+    sides = {'ref': ref_tree, 'this': this_tree}
+    # one untimed run per side first: numba compiles into the tree's cache on first use
+    for tree in sides.values():
+        run_worker(tree, 0.1, not args.undamped)
+    results = {'ref': [], 'this': []}
+    for i in range(args.repeats):
+        for side in (('ref', 'this') if i % 2 == 0 else ('this', 'ref')):
+            results[side].append(run_worker(sides[side], args.sim_seconds, not args.undamped))
+        r, t = results['ref'][-1], results['this'][-1]
+        print(f'  pair {i + 1}/{args.repeats}: CPU RTF ref {r["rtf_cpu"]:.1f}x this {t["rtf_cpu"]:.1f}x, '
+              f'wall ref {r["rtf_wall"]:.1f}x this {t["rtf_wall"]:.1f}x', flush=True)
+    med = statistics.median
+
+    def stat(side, key):
+        return med(res[key] for res in results[side])
+    pair_cpu = [t['rtf_cpu'] / r['rtf_cpu'] for r, t in zip(results['ref'], results['this'])]
+    pair_wall = [t['rtf_wall'] / r['rtf_wall'] for r, t in zip(results['ref'], results['this'])]
+    diff = max(float(np.abs(np.subtract(r['x'], t['x'])).max()) for r, t in zip(results['ref'], results['this']))
+    gait = 'without' if args.undamped else 'with'
+    print(f'frog_sim real-time factor, this tree ({head}) vs {ref_name}: 10 % EGaIn, 1 Hz gait, phase 0.5, '
+          f'{gait} the lumped body damping')
+    print(f'  {pin}; {args.repeats} fresh subprocesses per side, alternating (ABBA), '
+          f'{args.sim_seconds:g} sim s each after a warm-up (warm-up median ref {stat("ref", "warm_s"):.2f} s, '
+          f'this {stat("this", "warm_s"):.2f} s: numba cache loads)')
+    for side, name in (('ref', ref_name), ('this', f'this tree ({head})')):
+        print(f'  {name}: median RTF {stat(side, "rtf_cpu"):.1f}x by CPU time, {stat(side, "rtf_wall"):.1f}x by wall '
+              f'time; {stat(side, "iters"):.2f} Newton iterations/step, {stat(side, "facts"):.2f} LU '
+              f'factorisations/step')
+    print(f'  ratio this / ref of the medians: {stat("this", "rtf_cpu") / stat("ref", "rtf_cpu"):.3f} (CPU), '
+          f'{stat("this", "rtf_wall") / stat("ref", "rtf_wall"):.3f} (wall); median of the per-pair ratios '
+          f'{med(pair_cpu):.3f} (CPU, min {min(pair_cpu):.3f}, max {max(pair_cpu):.3f}), {med(pair_wall):.3f} (wall)')
+    print(f'  same steps: max |x_this - x_ref| = {diff:.2e} m after {args.sim_seconds:g} s')
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--sim-seconds', type=float, default=10.0, help='simulated seconds per library run')
-    parser.add_argument('--repeats', type=int, default=5, help='library runs (median reported)')
+    parser.add_argument('--repeats', type=int, default=5, help='library runs (median reported); with '
+                        '--compare-ref: subprocesses per side')
     parser.add_argument('--numpy-seconds', type=float, default=0.5, help='simulated seconds per numpy run')
     parser.add_argument('--numpy-repeats', type=int, default=3)
+    parser.add_argument('--compare-ref', metavar='REF', help='compare the library path with git revision REF '
+                        '(e.g. main) in alternating subprocesses instead')
+    parser.add_argument('--ref-tree', metavar='DIR', help='with --compare-ref: a checkout of REF to use '
+                        '(default: git archive of REF into ~/.cache/frog_sim/bench_trees/)')
+    parser.add_argument('--undamped', action='store_true', help='with --compare-ref: the gait without the '
+                        'lumped body damping')
+    parser.add_argument('--worker', action='store_true', help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.worker:
+        print(json.dumps(measure_once(args.sim_seconds, not args.undamped)))
+        return
+    if args.compare_ref:
+        compare(args)
+        return
     pin = pin_to_one_core()
 
     from frog_sim.core.actuation import ActuationLibrary
