@@ -18,8 +18,10 @@ Run: ``./dev bench frog_sim_realtime`` (or ``./dev run python bench/frog_sim_rea
 the one of git revision REF in the same run: each measurement is a fresh subprocess whose
 ``PYTHONPATH`` starts with the ``frog_sim`` source tree of one side (REF's is exported with
 ``git archive`` into ``~/.cache/frog_sim/bench_trees/<sha>``, or given by ``--ref-tree``),
-both sides alternate (ABBA), each subprocess warms up (numba cache load or compile) before
-its timed run, and both read the same measurements (``FROG_DATA_DIR``). It prints the median
+both sides alternate (ABBA), each subprocess warms up (numba cache load) before its timed
+run, and both read the same measurements (``FROG_DATA_DIR``). Each side compiles once into
+an empty numba cache of its own for the run (numba does not notice a stale cache of a
+function whose callees changed in another module). It prints the median
 CPU-time and wall-time real-time factors of each side, their ratio (this / REF; >= 1: this
 tree is not slower), the median of the per-pair ratios, and the largest difference of the
 two sides' final states.
@@ -35,10 +37,12 @@ import argparse  # noqa: E402
 import io  # noqa: E402
 import json  # noqa: E402
 import resource  # noqa: E402
+import shutil  # noqa: E402
 import statistics  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tarfile  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -100,12 +104,14 @@ def export_tree(ref: str) -> tuple[Path, str]:
     return root / PACKAGE_DIR, sha
 
 
-def run_worker(tree: Path, sim_seconds: float, damped: bool) -> dict:
-    """:func:`measure_once` in a fresh subprocess importing ``frog_sim`` from ``tree``."""
+def run_worker(tree: Path, sim_seconds: float, damped: bool, numba_cache: Path) -> dict:
+    """:func:`measure_once` in a fresh subprocess importing ``frog_sim`` from ``tree``, with
+    numba's cache in ``numba_cache``."""
     from frog_sim.core.actuation import find_data_dir
     env = dict(os.environ)
     env['PYTHONPATH'] = os.pathsep.join([str(tree)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p])
     env.setdefault('FROG_DATA_DIR', str(find_data_dir()))
+    env['NUMBA_CACHE_DIR'] = str(numba_cache)
     cmd = [sys.executable, str(Path(__file__).resolve()), '--worker', '--sim-seconds', str(sim_seconds)]
     if not damped:
         cmd.append('--undamped')
@@ -128,16 +134,26 @@ def compare(args) -> None:
                           text=True).stdout.strip()
     this_tree = REPO / PACKAGE_DIR
     sides = {'ref': ref_tree, 'this': this_tree}
-    # one untimed run per side first: numba compiles into the tree's cache on first use
-    for tree in sides.values():
-        run_worker(tree, 0.1, not args.undamped)
-    results = {'ref': [], 'this': []}
-    for i in range(args.repeats):
-        for side in (('ref', 'this') if i % 2 == 0 else ('this', 'ref')):
-            results[side].append(run_worker(sides[side], args.sim_seconds, not args.undamped))
-        r, t = results['ref'][-1], results['this'][-1]
-        print(f'  pair {i + 1}/{args.repeats}: CPU RTF ref {r["rtf_cpu"]:.1f}x this {t["rtf_cpu"]:.1f}x, '
-              f'wall ref {r["rtf_wall"]:.1f}x this {t["rtf_wall"]:.1f}x', flush=True)
+    # numba's cache checks only the source file of a cached function, not the modules of the
+    # kernels it calls: a tree's own __pycache__ can hold an integrator compiled with older
+    # kernels. Each side gets an empty cache for this run, filled by one untimed first run.
+    caches = {side: Path(tempfile.mkdtemp(prefix=f'frog_sim_bench_numba_{side}_')) for side in sides}
+    compile_s = {}
+    try:
+        for side, tree in sides.items():
+            t0 = time.perf_counter()
+            run_worker(tree, 0.1, not args.undamped, caches[side])
+            compile_s[side] = time.perf_counter() - t0
+        results = {'ref': [], 'this': []}
+        for i in range(args.repeats):
+            for side in (('ref', 'this') if i % 2 == 0 else ('this', 'ref')):
+                results[side].append(run_worker(sides[side], args.sim_seconds, not args.undamped, caches[side]))
+            r, t = results['ref'][-1], results['this'][-1]
+            print(f'  pair {i + 1}/{args.repeats}: CPU RTF ref {r["rtf_cpu"]:.1f}x this {t["rtf_cpu"]:.1f}x, '
+                  f'wall ref {r["rtf_wall"]:.1f}x this {t["rtf_wall"]:.1f}x', flush=True)
+    finally:
+        for cache in caches.values():
+            shutil.rmtree(cache, ignore_errors=True)
     med = statistics.median
 
     def stat(side, key):
@@ -150,7 +166,8 @@ def compare(args) -> None:
           f'{gait} the lumped body damping')
     print(f'  {pin}; {args.repeats} fresh subprocesses per side, alternating (ABBA), '
           f'{args.sim_seconds:g} sim s each after a warm-up (warm-up median ref {stat("ref", "warm_s"):.2f} s, '
-          f'this {stat("this", "warm_s"):.2f} s: numba cache loads)')
+          f'this {stat("this", "warm_s"):.2f} s: numba cache loads); first run into an empty numba cache '
+          f'(compilation) ref {compile_s["ref"]:.0f} s, this {compile_s["this"]:.0f} s')
     for side, name in (('ref', ref_name), ('this', f'this tree ({head})')):
         print(f'  {name}: median RTF {stat(side, "rtf_cpu"):.1f}x by CPU time, {stat(side, "rtf_wall"):.1f}x by wall '
               f'time; {stat(side, "iters"):.2f} Newton iterations/step, {stat(side, "facts"):.2f} LU '
