@@ -20,7 +20,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from .element_sets import register_implicit_term
+from .element_sets import register_implicit_term, stack_array
 
 
 @njit(cache=True, fastmath=True, error_model='numpy')
@@ -172,10 +172,10 @@ StretchTerm = namedtuple('StretchTerm', 'rest_length stiffness')
 StretchTerm.__doc__ = """Stretching energy E_s of the edges (an element = the 4 DOFs of an edge):
 rest lengths dl (E,) [m] and EA (E,) [N] (the live array the actuation writes)."""
 
-BendTerm = namedtuple('BendTerm', 'length stiffness natural_curvature work')
+BendTerm = namedtuple('BendTerm', 'length stiffness natural_curvature')
 BendTerm.__doc__ = """Bending energy E_b of the bends (an element = the 6 DOFs of a node triple):
 Voronoi lengths dl (B,) [m], EI (B,) [N m^2], kappa0 (B,) [1/m] (live arrays of the
-actuation) and a scratch array (3, 4, 4)."""
+actuation)."""
 
 
 @njit(cache=True, inline='always', error_model='numpy')
@@ -188,8 +188,9 @@ def stretch_term(term, m, xe, ve, grad, hess, dgdv, want_jac):
 @njit(cache=True, inline='always', error_model='numpy')
 def bend_term(term, m, xe, ve, grad, hess, dgdv, want_jac):
     """Implicit-term kernel of :class:`BendTerm` (gradient and Hessian of E_b, eq. 8)."""
+    work = stack_array((3, 4, 4), 48)
     bend_element(xe[0], xe[1], xe[2], xe[3], xe[4], xe[5], term.length[m], term.stiffness[m],
-                 term.natural_curvature[m], grad, hess, term.work, want_jac)
+                 term.natural_curvature[m], grad, hess, work, want_jac)
 
 
 register_implicit_term(StretchTerm, stretch_term)

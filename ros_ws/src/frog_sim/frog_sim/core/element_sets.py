@@ -10,9 +10,11 @@ elements. An **element set** groups elements of the same shape:
   rows and columns of fixed DOFs point to the trash slot (the last entry);
 * ``terms``: a tuple of **term records** that act on these elements. A term record is a
   namedtuple of the arrays its kernel reads (per-element parameters such as the rest
-  length and EA, the live arrays the actuation writes, scratch space).
+  length and EA, the live arrays the actuation writes); a kernel's scratch space is a
+  :func:`stack_array`.
 
-Terms of one set are summed in the order given before the element is scattered.
+Terms of one set are summed per element, in the order given, before the element is
+scattered (as one element loop per set).
 
 Implicit terms (inside Newton) have a kernel ::
 
@@ -38,14 +40,29 @@ Adding a term: write its kernel and its namedtuple of arrays, register them here
 :func:`register_implicit_term` / :func:`register_explicit_term`, and list it in an
 element set of the integrator (``ImplicitEulerIntegrator._element_sets``). The numba
 code is specialised per term type at compile time (and cached), so nothing else changes.
+
+Speed (the element loop runs ~4 times per step over every edge and bend): the terms of a
+set are unrolled per element with ``literal_unroll`` (a constant trip count: LLVM folds
+the switch on the term index into straight-line code), the dispatch and the term kernels are inlined in
+numba IR (declare kernels ``njit(inline='always')``; large element routines such as
+``bend_element`` stay plain calls, which LLVM inlines where they are small: the
+residual-only versions), the dispatch keeps ``want_jac`` and ``dynamic`` literal (the
+residual-only assembly compiles without Hessian code), and the per-element scratch
+arrays are unmanaged stack arrays (:func:`stack_array`): an NRT array handed to an
+inlined function in the loop costs an atomic incref/decref per element.
+
+numba's cache checks the source file of a cached function only, not the files of the
+functions it calls: after editing a kernel outside ``integrator.py``, delete
+``frog_sim/core/__pycache__/*.nb[ic]`` or the integrator keeps running the old kernel.
 """
 from __future__ import annotations
 
 from collections import namedtuple
 
 import numpy as np
-from numba import literal_unroll, njit
-from numba.extending import overload
+from numba import literal_unroll, njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic, overload
 
 ElementSet = namedtuple('ElementSet', 'dofs jac_maps terms')
 ElementSet.__doc__ = """Implicit element set: DOF map (M, k), Jacobian scatter maps (2, M, k, k) into
@@ -55,10 +72,12 @@ ExplicitSet = namedtuple('ExplicitSet', 'dofs terms')
 ExplicitSet.__doc__ = """Explicit element set: DOF map (M, k) and a tuple of explicit term records whose
 forces are evaluated at the start of each step and added to the applied force."""
 
+MAX_ELEMENT_DOFS = 16    # k of an implicit element set (its per-element scratch lives on the stack)
+_MAX_ELEMENT_JAC = MAX_ELEMENT_DOFS * MAX_ELEMENT_DOFS
+
 _IMPLICIT_KERNELS = {}   # term class -> (kernel, velocity dependent)
 _EXPLICIT_KERNELS = {}   # term class -> kernel
-# The dispatch to a term's kernel is inlined and prefers literal arguments: the residual-only
-# assembly (``want_jac`` = literal False) then compiles kernels without their Hessian code.
+# the dispatch overloads are inlined into the element loop (numba IR) and keep literal flags
 _JIT_OPTIONS = {'cache': True, 'error_model': 'numpy'}
 
 
@@ -91,7 +110,7 @@ def register_explicit_term(term_class, kernel):
 
 
 def _implicit_contribution(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl, hl):
-    """Add term ``term`` of element ``m`` to the element residuals ``gl[m]`` and Jacobians ``hl[m]``."""
+    """Add term ``term`` of element ``m`` to the element residual ``gl`` (k,) and Jacobian ``hl`` (k, k)."""
     raise NotImplementedError  # numba only (overloaded below per term class)
 
 
@@ -108,19 +127,19 @@ def _overload_implicit(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl,
             kernel(term, m, xe, ve, g, hm, dv, want_jac)
             k = xe.shape[0]
             for p in range(k):
-                gl[m, p] += g[p]
+                gl[p] += g[p]
                 if want_jac:
                     for q in range(k):
-                        hl[m, p, q] += hm[p, q] + dv[p, q] * inv_h
+                        hl[p, q] += hm[p, q] + dv[p, q] * inv_h
     else:
         def impl(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl, hl):
             kernel(term, m, xe, ve, g, hm, dv, want_jac)
             k = xe.shape[0]
             for p in range(k):
-                gl[m, p] += g[p]
+                gl[p] += g[p]
                 if want_jac:
                     for q in range(k):
-                        hl[m, p, q] += hm[p, q]
+                        hl[p, q] += hm[p, q]
     return impl
 
 
@@ -141,40 +160,106 @@ def _overload_explicit(term, m, xe, ve, force):
     return impl
 
 
+def _any_velocity_dependent(terms):
+    """Whether a term of the tuple depends on the velocity (a compile-time constant)."""
+    raise NotImplementedError  # numba only
+
+
+@overload(_any_velocity_dependent, inline='always', jit_options=_JIT_OPTIONS)
+def _overload_any_velocity_dependent(terms):
+    flags = []
+    for t in terms:
+        cls = getattr(t, 'instance_class', None)
+        if cls not in _IMPLICIT_KERNELS:
+            raise TypeError(f'{t} is not a registered implicit term (register_implicit_term)')
+        flags.append(_IMPLICIT_KERNELS[cls][1])
+    if any(flags):
+        return lambda terms: True
+    return lambda terms: False
+
+
+@intrinsic
+def stack_array(typingctx, shape, capacity):
+    """Scratch float64 C array of ``shape`` (a tuple) on the stack of the compiled function,
+    ``capacity`` (an int literal) elements; numba only. The caller guarantees that the
+    shape fits (checked at compile time when the shape is literal).
+
+    Unmanaged (no NRT meminfo): handed to a kernel inside the element loop, it costs no
+    reference counting (an NRT array there gets an atomic incref/decref per element and
+    call), and it is never freed. Valid until the compiled function that lowers the call
+    (after numba's inlining: the element-set assembly) returns; never return it. Kernels
+    use it for their own scratch space (``stack_array((3, 4, 4), 48)``).
+    """
+    if not (isinstance(capacity, types.IntegerLiteral) and isinstance(shape, types.BaseTuple)
+            and all(isinstance(dim, types.Integer) for dim in shape)):
+        return None
+    if all(isinstance(dim, types.IntegerLiteral) for dim in shape):
+        size = int(np.prod([dim.literal_value for dim in shape]))
+        if size > capacity.literal_value:
+            raise TypeError(f'stack_array: shape {shape} needs {size} elements, capacity {capacity.literal_value}')
+    arrty = types.Array(types.float64, len(shape), 'C')
+
+    def codegen(context, builder, sig, args):
+        data = cgutils.alloca_once(builder, context.get_value_type(types.float64), size=capacity.literal_value)
+        dims = cgutils.unpack_tuple(builder, args[0])
+        itemsize = context.get_constant(types.intp, 8)
+        strides = []
+        stride = itemsize
+        for dim in reversed(dims):
+            strides.insert(0, stride)
+            stride = builder.mul(stride, dim)
+        ary = context.make_array(arrty)(context, builder)
+        context.populate_array(ary, data=data, shape=dims, strides=strides, itemsize=itemsize, meminfo=None)
+        return ary._getvalue()
+    return arrty(shape, capacity), codegen
+
+
 @njit(cache=True, error_model='numpy')
 def assemble_element_set(es, target, x, x_prev, inv_h, dynamic, resid, data, want_jac):
     """Add the residual (eq. 6) and Jacobian (eq. 8) entries of one element set.
 
     ``target`` 0 scatters into the LU value array, 1 into the CSR one (``data``);
-    ``resid`` (2N,) is accumulated. Each element's terms are summed in their order
-    before the element is scattered (elements in order).
+    ``resid`` (2N,) is accumulated. Per element: gather its DOFs (velocities only if a
+    term needs them), sum its terms in their order (unrolled at compile time), scatter.
     """
     dofs = es.dofs
+    terms = es.terms
     n_el = dofs.shape[0]
     k = dofs.shape[1]
+    if k > MAX_ELEMENT_DOFS:
+        raise ValueError('an element set has more than MAX_ELEMENT_DOFS DOFs per element')
     jmap = es.jac_maps[target]
-    xe = np.empty(k)
-    ve = np.zeros(k)
-    g = np.empty(k)
-    hm = np.zeros((k, k))
-    dv = np.zeros((k, k))
-    gl = np.zeros((n_el, k))
-    hl = np.zeros((n_el if want_jac else 0, k, k))
-    for term in literal_unroll(es.terms):
-        for m in range(n_el):
-            for p in range(k):
-                d = dofs[m, p]
-                xe[p] = x[d]
-                if dynamic:
-                    ve[p] = (x[d] - x_prev[d]) * inv_h
-            _implicit_contribution(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl, hl)
+    need_v = dynamic and _any_velocity_dependent(terms)
+    xe = stack_array((k,), MAX_ELEMENT_DOFS)
+    ve = stack_array((k,), MAX_ELEMENT_DOFS)
+    g = stack_array((k,), MAX_ELEMENT_DOFS)
+    gl = stack_array((k,), MAX_ELEMENT_DOFS)
+    hm = stack_array((k, k), _MAX_ELEMENT_JAC)
+    dv = stack_array((k, k), _MAX_ELEMENT_JAC)
+    hl = stack_array((k, k), _MAX_ELEMENT_JAC)
+    for p in range(k):
+        ve[p] = 0.0
+        for q in range(k):
+            hm[p, q] = 0.0
+            dv[p, q] = 0.0
     for m in range(n_el):
         for p in range(k):
-            resid[dofs[m, p]] += gl[m, p]
+            d = dofs[m, p]
+            xe[p] = x[d]
+            if need_v:
+                ve[p] = (x[d] - x_prev[d]) * inv_h
+            gl[p] = 0.0
+            if want_jac:
+                for q in range(k):
+                    hl[p, q] = 0.0
+        for term in literal_unroll(terms):
+            _implicit_contribution(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl, hl)
+        for p in range(k):
+            resid[dofs[m, p]] += gl[p]
         if want_jac:
             for p in range(k):
                 for q in range(k):
-                    data[jmap[m, p, q]] += hl[m, p, q]
+                    data[jmap[m, p, q]] += hl[p, q]
 
 
 @njit(cache=True, error_model='numpy')

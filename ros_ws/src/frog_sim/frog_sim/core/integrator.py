@@ -400,7 +400,6 @@ class ImplicitEulerIntegrator:
         self.kappa0 = network.bend_natural_curvature.copy()
         self.ei = network.bend_stiffness.copy()
         self.ea = network.edge_stretching_stiffness.copy()
-        self._bend_work = np.empty((3, 4, 4))
         self.external_force = np.zeros(n)
         coef = np.asarray(body_damping, dtype=float)
         if coef.shape != (3,) or not np.all(np.isfinite(coef)) or np.any(coef < 0):
@@ -434,7 +433,7 @@ class ImplicitEulerIntegrator:
         return (ElementSet(self._edge_dofs, self._edge_maps,
                            (StretchTerm(net.edge_rest_length, self.ea), DragTerm(self.cn, self.ct))),
                 ElementSet(self._bend_dofs, self._bend_maps,
-                           (BendTerm(net.bend_length, self.ei, self.kappa0, self._bend_work),)))
+                           (BendTerm(net.bend_length, self.ei, self.kappa0),)))
 
     def _explicit_sets(self):
         """The explicit (lagged) element sets, evaluated at the start of each step and added
