@@ -193,8 +193,8 @@ def bend_term(term, m, xe, ve, grad, hess, dgdv, want_jac):
                  term.natural_curvature[m], grad, hess, work, want_jac)
 
 
-register_implicit_term(StretchTerm, stretch_term)
-register_implicit_term(BendTerm, bend_term)
+register_implicit_term(StretchTerm, stretch_term, n_dofs=4)
+register_implicit_term(BendTerm, bend_term, n_dofs=6)
 
 
 @njit(cache=True, error_model='numpy')

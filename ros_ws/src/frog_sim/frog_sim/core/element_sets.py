@@ -16,7 +16,8 @@ elements. An **element set** groups elements of the same shape:
 Terms of one set are summed per element, in the order given, before the element is
 scattered (as one element loop per set).
 
-Implicit terms (inside Newton) have a kernel ::
+Implicit terms (inside Newton) act on elements of a fixed number k of DOFs (``n_dofs`` at
+registration) and have a kernel ::
 
     kernel(term, m, xe, ve, grad, hess, dgdv, want_jac)
 
@@ -43,7 +44,8 @@ code is specialised per term type at compile time (and cached), so nothing else 
 
 Speed (the element loop runs ~4 times per step over every edge and bend): the terms of a
 set are unrolled per element with ``literal_unroll`` (a constant trip count: LLVM folds
-the switch on the term index into straight-line code), the dispatch and the term kernels are inlined in
+the switch on the term index into straight-line code), k is a compile-time constant (the
+loops over an element's DOFs unroll), the dispatch and the term kernels are inlined in
 numba IR (declare kernels ``njit(inline='always')``; large element routines such as
 ``bend_element`` stay plain calls, which LLVM inlines where they are small: the
 residual-only versions), the dispatch keeps ``want_jac`` and ``dynamic`` literal (the
@@ -75,13 +77,13 @@ forces are evaluated at the start of each step and added to the applied force.""
 MAX_ELEMENT_DOFS = 16    # k of an implicit element set (its per-element scratch lives on the stack)
 _MAX_ELEMENT_JAC = MAX_ELEMENT_DOFS * MAX_ELEMENT_DOFS
 
-_IMPLICIT_KERNELS = {}   # term class -> (kernel, velocity dependent)
+_IMPLICIT_KERNELS = {}   # term class -> (kernel, velocity dependent, DOFs per element)
 _EXPLICIT_KERNELS = {}   # term class -> kernel
 # the dispatch overloads are inlined into the element loop (numba IR) and keep literal flags
 _JIT_OPTIONS = {'cache': True, 'error_model': 'numpy'}
 
 
-def register_implicit_term(term_class, kernel, velocity_dependent=False):
+def register_implicit_term(term_class, kernel, n_dofs, velocity_dependent=False):
     """Register the numba ``kernel`` of the implicit term records of ``term_class``.
 
     Parameters
@@ -92,6 +94,10 @@ def register_implicit_term(term_class, kernel, velocity_dependent=False):
         file would break loading that cache in other processes).
     kernel : numba dispatcher
         ``kernel(term, m, xe, ve, grad, hess, dgdv, want_jac)``, see the module docstring.
+    n_dofs : int
+        DOFs of one element (k, at most ``MAX_ELEMENT_DOFS``): the width of the DOF map of
+        every element set the term is listed in. A compile-time constant of the assembly,
+        so its per-element loops are unrolled.
     velocity_dependent : bool
         The term depends on the velocity (writes ``dgdv``); it is then dynamic only.
 
@@ -99,7 +105,10 @@ def register_implicit_term(term_class, kernel, velocity_dependent=False):
     -------
     term_class
     """
-    _IMPLICIT_KERNELS[term_class] = (kernel, bool(velocity_dependent))
+    n_dofs = int(n_dofs)
+    if not 1 <= n_dofs <= MAX_ELEMENT_DOFS:
+        raise ValueError(f'n_dofs = {n_dofs} of {term_class.__name__} must be in 1-{MAX_ELEMENT_DOFS}')
+    _IMPLICIT_KERNELS[term_class] = (kernel, bool(velocity_dependent), n_dofs)
     return term_class
 
 
@@ -119,7 +128,7 @@ def _overload_implicit(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl,
     cls = getattr(term, 'instance_class', None)
     if cls not in _IMPLICIT_KERNELS:
         raise TypeError(f'{term} is not a registered implicit term (register_implicit_term)')
-    kernel, velocity_dependent = _IMPLICIT_KERNELS[cls]
+    kernel, velocity_dependent, _ = _IMPLICIT_KERNELS[cls]
     if velocity_dependent:
         def impl(term, m, xe, ve, inv_h, dynamic, want_jac, g, hm, dv, gl, hl):
             if not dynamic:
@@ -160,22 +169,28 @@ def _overload_explicit(term, m, xe, ve, force):
     return impl
 
 
-def _any_velocity_dependent(terms):
-    """Whether a term of the tuple depends on the velocity (a compile-time constant)."""
+def _term_traits(terms):
+    """(DOFs per element, any term velocity dependent) of a tuple of terms: compile-time constants."""
     raise NotImplementedError  # numba only
 
 
-@overload(_any_velocity_dependent, inline='always', jit_options=_JIT_OPTIONS)
-def _overload_any_velocity_dependent(terms):
-    flags = []
+@overload(_term_traits, inline='always', jit_options=_JIT_OPTIONS)
+def _overload_term_traits(terms):
+    if len(terms) == 0:
+        raise TypeError('an element set needs at least one term')
+    traits = []
     for t in terms:
         cls = getattr(t, 'instance_class', None)
         if cls not in _IMPLICIT_KERNELS:
             raise TypeError(f'{t} is not a registered implicit term (register_implicit_term)')
-        flags.append(_IMPLICIT_KERNELS[cls][1])
-    if any(flags):
-        return lambda terms: True
-    return lambda terms: False
+        traits.append(_IMPLICIT_KERNELS[cls][1:])
+    widths = {n for _, n in traits}
+    if len(widths) != 1:
+        raise TypeError(f'the terms {terms} of one element set act on different numbers of DOFs {widths}')
+    width = widths.pop()
+    if any(v for v, _ in traits):
+        return lambda terms: (width, True)
+    return lambda terms: (width, False)
 
 
 @intrinsic
@@ -225,11 +240,11 @@ def assemble_element_set(es, target, x, x_prev, inv_h, dynamic, resid, data, wan
     dofs = es.dofs
     terms = es.terms
     n_el = dofs.shape[0]
-    k = dofs.shape[1]
-    if k > MAX_ELEMENT_DOFS:
-        raise ValueError('an element set has more than MAX_ELEMENT_DOFS DOFs per element')
+    k, velocity_dependent = _term_traits(terms)
+    if dofs.shape[1] != k:
+        raise ValueError('the DOF map of an element set is not as wide as its terms\' n_dofs')
     jmap = es.jac_maps[target]
-    need_v = dynamic and _any_velocity_dependent(terms)
+    need_v = dynamic and velocity_dependent
     xe = stack_array((k,), MAX_ELEMENT_DOFS)
     ve = stack_array((k,), MAX_ELEMENT_DOFS)
     g = stack_array((k,), MAX_ELEMENT_DOFS)

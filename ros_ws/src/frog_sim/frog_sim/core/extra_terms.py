@@ -44,4 +44,4 @@ def tether_term(term, m, xe, ve, grad, hess, dgdv, want_jac):
                 hess[p, q] = k if p == q else 0.0
 
 
-register_implicit_term(TetherTerm, tether_term)
+register_implicit_term(TetherTerm, tether_term, n_dofs=2)

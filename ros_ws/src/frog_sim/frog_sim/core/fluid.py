@@ -180,4 +180,4 @@ def drag_term(term, m, xe, ve, grad, hess, dgdv, want_jac):
                 dgdv[p, q] = -dgdv[p, q]
 
 
-register_implicit_term(DragTerm, drag_term, velocity_dependent=True)
+register_implicit_term(DragTerm, drag_term, n_dofs=4, velocity_dependent=True)
