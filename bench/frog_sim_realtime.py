@@ -15,16 +15,17 @@ CPU-time figure is the one-core cost, the wall-time figure includes waiting for 
 Run: ``./dev bench frog_sim_realtime`` (or ``./dev run python bench/frog_sim_realtime.py``).
 
 ``--compare-ref REF`` (e.g. ``main``) instead measures the library path of this tree against
-the one of git revision REF in the same run: each measurement is a fresh subprocess whose
-``PYTHONPATH`` starts with the ``frog_sim`` source tree of one side (REF's is exported with
-``git archive`` into ``~/.cache/frog_sim/bench_trees/<sha>``, or given by ``--ref-tree``),
-both sides alternate (ABBA), each subprocess warms up (numba cache load) before its timed
-run, and both read the same measurements (``FROG_DATA_DIR``). Each side compiles once into
-an empty numba cache of its own for the run (numba does not notice a stale cache of a
-function whose callees changed in another module). It prints the median
-CPU-time and wall-time real-time factors of each side, their ratio (this / REF; >= 1: this
-tree is not slower), the median of the per-pair ratios, and the largest difference of the
-two sides' final states.
+the one of git revision REF in the same run: REF's ``frog_sim`` source tree is exported with
+``git archive`` into ``~/.cache/frog_sim/bench_trees/<sha>`` (or given by ``--ref-tree``);
+each of ``--repeats`` fresh worker processes imports this tree as ``frog_sim`` and REF's as
+``frog_sim_ref`` (the package imports itself relatively), warms both up and runs them
+alternately, ``--inner`` times each (which side starts alternates between processes too);
+both read the same measurements (``FROG_DATA_DIR``) and a numba cache made empty for the
+run (numba does not notice a stale cache of a function whose callees changed in another
+module), filled by a first untimed worker whose warm-up times are the compile times. It
+prints the median CPU-time and wall-time real-time factors of each side, their ratio
+(this / REF; >= 1: this tree is not slower), the median and quartiles of the per-pair
+ratios, and the largest difference of the two sides' final states.
 """
 from __future__ import annotations
 
@@ -34,6 +35,8 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS', 'NUMB
     os.environ.setdefault(_var, '1')
 
 import argparse  # noqa: E402
+import importlib  # noqa: E402
+import importlib.util  # noqa: E402
 import io  # noqa: E402
 import json  # noqa: E402
 import resource  # noqa: E402
@@ -63,31 +66,61 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGE_DIR = 'ros_ws/src/frog_sim'      # the frog_sim source tree inside the repository
 
 
-def measure_once(sim_seconds: float, damped: bool = True) -> dict:
-    """One timed library run of the bench's gait in this process, after a warm-up."""
-    from frog_sim.core.actuation import ActuationLibrary
-    from frog_sim.core.model_parameters import FrogParameters
-    from frog_sim.core.simulation import DEFAULT_TIME_STEP, FrogSimulation
-    lib = ActuationLibrary.load()
-    params = FrogParameters()
+def measure_once(sim_seconds: float, damped: bool = True, package: str = 'frog_sim') -> dict:
+    """One timed library run of the bench's gait with the ``frog_sim`` imported as ``package``,
+    after a warm-up (numba cache load or compile, timed as ``warm_s``)."""
+    core = importlib.import_module(f'{package}.core')
+    actuation = importlib.import_module(f'{package}.core.actuation')
+    model_parameters = importlib.import_module(f'{package}.core.model_parameters')
+    simulation = importlib.import_module(f'{package}.core.simulation')
+    lib = actuation.ActuationLibrary.load()
+    params = model_parameters.FrogParameters()
     if not damped:
         params = params.replace(surge_damping_linear=0.0, sway_damping_linear=0.0, yaw_damping_linear=0.0)
     t0 = time.perf_counter()
-    warm = FrogSimulation(params, library=lib)
+    warm = simulation.FrogSimulation(params, library=lib)
     warm.set_gait(1.0, 0.5)
     warm.step(10)
     warm_s = time.perf_counter() - t0
-    sim = FrogSimulation(params, library=lib)
+    sim = simulation.FrogSimulation(params, library=lib)
     sim.set_gait(1.0, 0.5)
-    n_steps = int(round(sim_seconds / DEFAULT_TIME_STEP))
+    n_steps = int(round(sim_seconds / simulation.DEFAULT_TIME_STEP))
     t0, c0 = time.perf_counter(), time.process_time()
     sim.step(n_steps)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    import frog_sim
     return {'rtf_wall': sim_seconds / wall, 'rtf_cpu': sim_seconds / cpu, 'warm_s': warm_s,
             'iters': sim.integrator.stats.newton_iterations / n_steps,
             'facts': sim.integrator.factorizations / n_steps,
-            'x': sim.integrator.x.tolist(), 'source': str(Path(frog_sim.__file__).resolve().parent)}
+            'x': sim.integrator.x.tolist(), 'source': str(Path(core.__file__).resolve().parent.parent)}
+
+
+REF_PACKAGE = 'frog_sim_ref'    # the reference tree's frog_sim, imported under this name beside ours
+
+
+def import_as(package_dir: Path, name: str):
+    """Import the package in ``package_dir`` (a ``frog_sim`` folder) under the name ``name``
+    (its modules import each other relatively, so both trees can live in one process)."""
+    spec = importlib.util.spec_from_file_location(name, package_dir / '__init__.py',
+                                                  submodule_search_locations=[str(package_dir)])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def measure_pair(ref_tree: Path, sim_seconds: float, damped: bool, inner: int, first: str) -> dict:
+    """``inner`` timed runs of each tree in this process, alternating (``first`` starts), after
+    a warm-up of both: this tree is ``frog_sim`` (first on the path), the reference tree is
+    imported as :data:`REF_PACKAGE`."""
+    import_as(ref_tree / 'frog_sim', REF_PACKAGE)
+    packages = {'this': 'frog_sim', 'ref': REF_PACKAGE}
+    order = [first, 'ref' if first == 'this' else 'this']
+    warm = {side: measure_once(0.02, damped, packages[side])['warm_s'] for side in order}
+    out = {'ref': [], 'this': [], 'warm_s': warm}
+    for j in range(inner):
+        for side in (order if j % 2 == 0 else order[::-1]):
+            out[side].append(measure_once(sim_seconds, damped, packages[side]))
+    return out
 
 
 def export_tree(ref: str) -> tuple[Path, str]:
@@ -104,26 +137,30 @@ def export_tree(ref: str) -> tuple[Path, str]:
     return root / PACKAGE_DIR, sha
 
 
-def run_worker(tree: Path, sim_seconds: float, damped: bool, numba_cache: Path) -> dict:
-    """:func:`measure_once` in a fresh subprocess importing ``frog_sim`` from ``tree``, with
-    numba's cache in ``numba_cache``."""
+def run_worker(ref_tree: Path, sim_seconds: float, damped: bool, numba_cache: Path, inner: int, first: str) -> dict:
+    """:func:`measure_pair` in a fresh subprocess with numba's cache in ``numba_cache``."""
     from frog_sim.core.actuation import find_data_dir
+    this_tree = REPO / PACKAGE_DIR
     env = dict(os.environ)
-    env['PYTHONPATH'] = os.pathsep.join([str(tree)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p])
+    env['PYTHONPATH'] = os.pathsep.join([str(this_tree)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep)
+                                                            if p])
     env.setdefault('FROG_DATA_DIR', str(find_data_dir()))
     env['NUMBA_CACHE_DIR'] = str(numba_cache)
-    cmd = [sys.executable, str(Path(__file__).resolve()), '--worker', '--sim-seconds', str(sim_seconds)]
+    cmd = [sys.executable, str(Path(__file__).resolve()), '--worker', str(ref_tree), '--sim-seconds', str(sim_seconds),
+           '--inner', str(inner), '--first', first]
     if not damped:
         cmd.append('--undamped')
     out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
     result = json.loads(out.strip().splitlines()[-1])
-    if Path(result['source']) != (tree / 'frog_sim').resolve():
-        raise RuntimeError(f'the worker imported frog_sim from {result["source"]}, expected {tree}')
+    for side, tree in (('this', this_tree), ('ref', ref_tree)):
+        if Path(result[side][0]['source']) != (tree / 'frog_sim').resolve():
+            raise RuntimeError(f'the worker ran {result[side][0]["source"]} as {side}, expected {tree}')
     return result
 
 
 def compare(args) -> None:
-    """This tree against git revision ``args.compare_ref``, alternating subprocesses (ABBA)."""
+    """This tree against git revision ``args.compare_ref``, alternating in each of a series of
+    fresh subprocesses (which side starts alternates too)."""
     pin = pin_to_one_core()      # inherited by the workers
     if args.ref_tree:
         ref_tree, ref_name = Path(args.ref_tree).resolve() / PACKAGE_DIR, f'{args.compare_ref} at {args.ref_tree}'
@@ -132,28 +169,26 @@ def compare(args) -> None:
         ref_name = f'{args.compare_ref} ({sha[:8]})'
     head = subprocess.run(['git', '-C', str(REPO), 'describe', '--always', '--dirty'], capture_output=True,
                           text=True).stdout.strip()
-    this_tree = REPO / PACKAGE_DIR
-    sides = {'ref': ref_tree, 'this': this_tree}
+    fit = 'frog_sim/data/actuation_fit.json'     # read from this tree by both (importlib.resources)
+    if (ref_tree / fit).read_bytes() != (REPO / PACKAGE_DIR / fit).read_bytes():
+        print(f'  warning: {fit} differs between the trees; both sides use this tree\'s')
     # numba's cache checks only the source file of a cached function, not the modules of the
     # kernels it calls: a tree's own __pycache__ can hold an integrator compiled with older
-    # kernels. Each side gets an empty cache for this run, filled by one untimed first run.
-    caches = {side: Path(tempfile.mkdtemp(prefix=f'frog_sim_bench_numba_{side}_')) for side in sides}
-    compile_s = {}
+    # kernels. The run gets an empty cache, filled by a first untimed worker.
+    cache = Path(tempfile.mkdtemp(prefix='frog_sim_bench_numba_'))
     try:
-        for side, tree in sides.items():
-            t0 = time.perf_counter()
-            run_worker(tree, 0.1, not args.undamped, caches[side])
-            compile_s[side] = time.perf_counter() - t0
+        first = run_worker(ref_tree, 0.02, not args.undamped, cache, 1, 'ref')
+        compile_s = first['warm_s']
         results = {'ref': [], 'this': []}
         for i in range(args.repeats):
-            for side in (('ref', 'this') if i % 2 == 0 else ('this', 'ref')):
-                results[side].append(run_worker(sides[side], args.sim_seconds, not args.undamped, caches[side]))
-            r, t = results['ref'][-1], results['this'][-1]
-            print(f'  pair {i + 1}/{args.repeats}: CPU RTF ref {r["rtf_cpu"]:.1f}x this {t["rtf_cpu"]:.1f}x, '
-                  f'wall ref {r["rtf_wall"]:.1f}x this {t["rtf_wall"]:.1f}x', flush=True)
+            res = run_worker(ref_tree, args.sim_seconds, not args.undamped, cache, args.inner,
+                             'ref' if i % 2 == 0 else 'this')
+            for side in results:
+                results[side] += res[side]
+            ref_rtf, this_rtf = (' '.join(f'{r["rtf_cpu"]:.1f}' for r in res[side]) for side in ('ref', 'this'))
+            print(f'  process {i + 1}/{args.repeats}: CPU RTF ref {ref_rtf}, this {this_rtf}', flush=True)
     finally:
-        for cache in caches.values():
-            shutil.rmtree(cache, ignore_errors=True)
+        shutil.rmtree(cache, ignore_errors=True)
     med = statistics.median
 
     def stat(side, key):
@@ -162,19 +197,20 @@ def compare(args) -> None:
     pair_wall = [t['rtf_wall'] / r['rtf_wall'] for r, t in zip(results['ref'], results['this'])]
     diff = max(float(np.abs(np.subtract(r['x'], t['x'])).max()) for r, t in zip(results['ref'], results['this']))
     gait = 'without' if args.undamped else 'with'
+    n = len(results['ref'])
     print(f'frog_sim real-time factor, this tree ({head}) vs {ref_name}: 10 % EGaIn, 1 Hz gait, phase 0.5, '
           f'{gait} the lumped body damping')
-    print(f'  {pin}; {args.repeats} fresh subprocesses per side, alternating (ABBA), '
-          f'{args.sim_seconds:g} sim s each after a warm-up (warm-up median ref {stat("ref", "warm_s"):.2f} s, '
-          f'this {stat("this", "warm_s"):.2f} s: numba cache loads); first run into an empty numba cache '
-          f'(compilation) ref {compile_s["ref"]:.0f} s, this {compile_s["this"]:.0f} s')
+    print(f'  {pin}; {n} runs of {args.sim_seconds:g} sim s per side, alternating, in {args.repeats} fresh '
+          f'processes of {args.inner} + {args.inner}; first run into an empty numba cache (compilation) ref '
+          f'{compile_s["ref"]:.0f} s, this {compile_s["this"]:.0f} s')
     for side, name in (('ref', ref_name), ('this', f'this tree ({head})')):
         print(f'  {name}: median RTF {stat(side, "rtf_cpu"):.1f}x by CPU time, {stat(side, "rtf_wall"):.1f}x by wall '
               f'time; {stat(side, "iters"):.2f} Newton iterations/step, {stat(side, "facts"):.2f} LU '
               f'factorisations/step')
     print(f'  ratio this / ref of the medians: {stat("this", "rtf_cpu") / stat("ref", "rtf_cpu"):.3f} (CPU), '
-          f'{stat("this", "rtf_wall") / stat("ref", "rtf_wall"):.3f} (wall); median of the per-pair ratios '
-          f'{med(pair_cpu):.3f} (CPU, min {min(pair_cpu):.3f}, max {max(pair_cpu):.3f}), {med(pair_wall):.3f} (wall)')
+          f'{stat("this", "rtf_wall") / stat("ref", "rtf_wall"):.3f} (wall); median of the {n} per-pair ratios '
+          f'{med(pair_cpu):.3f} (CPU, quartiles {np.percentile(pair_cpu, 25):.3f}-{np.percentile(pair_cpu, 75):.3f}), '
+          f'{med(pair_wall):.3f} (wall)')
     print(f'  same steps: max |x_this - x_ref| = {diff:.2e} m after {args.sim_seconds:g} s')
 
 
@@ -182,19 +218,21 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--sim-seconds', type=float, default=10.0, help='simulated seconds per library run')
     parser.add_argument('--repeats', type=int, default=5, help='library runs (median reported); with '
-                        '--compare-ref: subprocesses per side')
+                        '--compare-ref: worker processes')
     parser.add_argument('--numpy-seconds', type=float, default=0.5, help='simulated seconds per numpy run')
     parser.add_argument('--numpy-repeats', type=int, default=3)
     parser.add_argument('--compare-ref', metavar='REF', help='compare the library path with git revision REF '
-                        '(e.g. main) in alternating subprocesses instead')
+                        '(e.g. main), alternating in fresh worker processes, instead')
     parser.add_argument('--ref-tree', metavar='DIR', help='with --compare-ref: a checkout of REF to use '
                         '(default: git archive of REF into ~/.cache/frog_sim/bench_trees/)')
     parser.add_argument('--undamped', action='store_true', help='with --compare-ref: the gait without the '
                         'lumped body damping')
-    parser.add_argument('--worker', action='store_true', help=argparse.SUPPRESS)
+    parser.add_argument('--inner', type=int, default=4, help='with --compare-ref: runs per side in each process')
+    parser.add_argument('--worker', metavar='REF_TREE', help=argparse.SUPPRESS)
+    parser.add_argument('--first', default='ref', help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
-        print(json.dumps(measure_once(args.sim_seconds, not args.undamped)))
+        print(json.dumps(measure_pair(Path(args.worker), args.sim_seconds, not args.undamped, args.inner, args.first)))
         return
     if args.compare_ref:
         compare(args)
