@@ -196,7 +196,7 @@ def test_odometry_with_an_old_stamp_blocks_decisions_and_is_counted(launch, prob
     probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
     odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
     node.wait_for_log("following a line path", timeout=60)
-    probe.wait_for_subscriber("/test/odom", timeout=20)
+    probe.wait_matched(odom_pub)
 
     def feed_until(make, predicate, timeout, what):
         end = time.monotonic() + timeout
