@@ -63,6 +63,33 @@ class GraphProbe:
         return self.spin_until(lambda: self.node.count_subscribers(topic) >= 1,
                                timeout, f"a subscriber on {topic}")
 
+    def wait_matched(self, publisher, subscribers: int = 1, timeout: float = 30.0) -> float:
+        """Wait until ``publisher`` (the probe's) has matched ``subscribers`` readers in DDS.
+
+        The graph (:meth:`wait_for_subscriber`) shows a subscription before the probe's writer
+        has matched it; a reliable, volatile message published in between is lost. The match
+        count is the writer's own view: a message published after this returns is delivered.
+        """
+        return self.spin_until(lambda: publisher.get_subscription_count() >= subscribers, timeout,
+                               f"{subscribers} matched subscriber(s) on {publisher.topic_name}")
+
+    def wait_heard(self, msg_type, topic: str, timeout: float = 30.0, qos=10, accept=None) -> float:
+        """Wait for one message on ``topic`` through a new subscription (then destroyed).
+
+        The publishing process has then discovered this subscription, and with it every
+        subscription the probe created before (Fast DDS announces a participant's endpoints in
+        creation order on one reliable channel): its outputs on those topics now reach the probe.
+        Use with a topic the node publishes periodically (``/diagnostics``, a status);
+        ``accept(msg)`` picks that node's messages where several publish on the topic.
+        """
+        got = []
+        sub = self.node.create_subscription(
+            msg_type, topic, lambda m: got.append(m) if accept is None or accept(m) else None, qos)
+        try:
+            return self.spin_until(lambda: got, timeout, f"a message on {topic}")
+        finally:
+            self.node.destroy_subscription(sub)
+
     def wait_for_service(self, client, timeout: float = 15.0) -> float:
         return self.spin_until(client.service_is_ready, timeout,
                                f"service {client.srv_name}")

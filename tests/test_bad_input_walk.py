@@ -39,6 +39,7 @@ pytestmark = pytest.mark.system
 QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 HUGE = 100_001
 REFUSAL = re.compile(r"refus|reject|ignor|invalid|non-finite|must be|out of range|not finite|is nan|is inf")
+MUST_REFUSE = re.compile(r"=(nan|inf|-inf)$")     # a non-finite value must be refused (and is logged)
 TOTALS: dict = {}
 
 
@@ -157,11 +158,44 @@ class Walk:
     def __init__(self, probe, node_name, proc):
         self.probe, self.node_name, self.proc = probe, node_name, proc
         self.rows = []          # (input, label, refused)
+        # the node's diagnostics heard: its outputs reach the probe's subscriptions made before
+        self.diagnostics(1)
+
+    def diagnostics(self, n=1, timeout=30.0):
+        """Wait for ``n`` diagnostics of the node published after this call began (1 Hz)."""
+        from diagnostic_msgs.msg import DiagnosticArray
+        prefix = self.node_name.lstrip("/") + ":"
+        got = []
+        sub = self.probe.node.create_subscription(
+            DiagnosticArray, "/diagnostics",
+            lambda m: got.append(m) if any(st.name.startswith(prefix) for st in m.status) else None, QOS)
+        try:
+            self.probe.spin_until(lambda: len(got) >= n, timeout, f"{n} diagnostics from {self.node_name}")
+        finally:
+            self.probe.node.destroy_subscription(sub)
+        return got
+
+    def barrier(self):
+        """A parameter-service round trip: the node's executor has run the callbacks of what
+        arrived before the request (subscriptions are served before services in a wake-up)."""
+        from rcl_interfaces.srv import ListParameters
+        client = self.probe.node.create_client(ListParameters, f"{self.node_name}/list_parameters")
+        try:
+            self.probe.wait_for_service(client, timeout=30)
+            self.probe.call(client, ListParameters.Request(), timeout=30)
+        finally:
+            self.probe.node.destroy_client(client)
+
+    def settled(self):
+        """Past every effect of the walk: the executor has handled all of it (barrier) and two
+        diagnostics published after that (>= 1 s of the node's own time) cover what a node does
+        later on its timers (a rear pulse 80 ms after the front, the planner's next period)."""
+        self.barrier()
+        self.diagnostics(2)
 
     def topic(self, topic, msg_type, make, stamped=False, settle=0.05):
         pub = self.probe.node.create_publisher(msg_type, topic, QOS)
-        self.probe.wait_for_subscriber(topic, timeout=30)
-        self.probe.spin_for(0.3)
+        self.probe.wait_matched(pub)
         for label, msg in variants(make, stamped):
             if _same_as_valid(msg, make) and not label.startswith("header.stamp"):
                 continue                           # (the valid input is stamped "now" below: a zero stamp differs)
@@ -170,16 +204,23 @@ class Walk:
             if msg_stamp is not None and not label.startswith("header.stamp"):
                 msg.header.stamp = self.probe.node.get_clock().now().to_msg()
             pub.publish(msg)
-            end = time.monotonic() + 3.0
+            # a non-finite value must be refused: its (first, so not rate-limited) refusal log is
+            # waited for; other values may be accepted: after 1 s without a refusal logged, a
+            # barrier shows the node has handled it, and the log is read once more
+            must = MUST_REFUSE.search(label) is not None
+            t0 = time.monotonic()
             refused = False
-            while time.monotonic() < end:         # a refusal is logged (or rate-limited: counted below)
+            while True:
                 self.probe.spin_for(settle)
-                new = self.proc.log_text()[before:]
-                if REFUSAL.search(new):
+                if REFUSAL.search(self.proc.log_text()[before:]):
                     refused = True
                     break
-                if time.monotonic() > end - 2.0 and new == "":
-                    break                          # nothing logged: probably rate-limited; see below
+                if not must and time.monotonic() - t0 > 1.0:
+                    self.barrier()
+                    refused = REFUSAL.search(self.proc.log_text()[before:]) is not None
+                    break
+                if time.monotonic() - t0 > 30.0:
+                    break                          # not refused: finish() names it
             self.rows.append((topic, label, refused))
         return pub
 
@@ -269,12 +310,12 @@ def test_walk_bridge_node(launch, probe, serial_pair, tmp_path):
         return LimbActivation(limbs=[1], pulse_duration=0.08)
     walk.topic("/frog/primitive", Primitive, primitive)
     walk.topic("/frog/limb_command", LimbActivation, limbs)
-    probe.spin_for(0.5)
+    walk.settled()
     _read_pty(controller, wire)
     actuations = len(re.findall(rb"(?m)^h ", bytes(wire)))
     walk.finish(actuations, tmp_path)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
-    probe.spin_for(0.3)
+    probe.wait_matched(pub)
     pub.publish(primitive())                                  # the detector works
     probe.spin_until(lambda: _read_pty(controller, wire) or re.search(rb"(?m)^h ", bytes(wire)), 5, "an h line")
 
@@ -289,9 +330,10 @@ def test_walk_sim_node(launch, probe, tmp_path):
     walk = Walk(probe, "/sim_node", sim)
     walk.topic("/frog/primitive", Primitive, lambda: Primitive(id=1, name="B"))
     walk.topic("/frog/limb_activation", LimbActivation, lambda: LimbActivation(limbs=[1], pulse_duration=0.08))
-    probe.spin_for(1.0)
+    walk.settled()
     # (the probe's own subscription makes the topic visible at once: wait for sim_node's odometry)
-    probe.spin_until(lambda: odom, 30, "odometry from sim_node")
+    n = len(odom)
+    probe.spin_until(lambda: len(odom) > n, 30, "odometry from sim_node after the walk")
 
     def speed():
         t = odom[-1].twist.twist
@@ -299,7 +341,7 @@ def test_walk_sim_node(launch, probe, tmp_path):
     moved = speed() > 1e-4 or not all(math.isfinite(v) for v in (odom[-1].pose.pose.position.x,))
     walk.finish(int(moved), tmp_path)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
-    probe.spin_for(0.3)
+    probe.wait_matched(pub)
     pub.publish(Primitive(id=1, name="B"))
     probe.spin_until(lambda: speed() > 1e-3, 10, "the kick moving the frog")
 
@@ -329,10 +371,10 @@ def test_walk_kinematics_node(launch, probe, tmp_path):
         target=Point(x=target[0], y=target[1], z=target[2]), initial_guess=[0.0, 0.0, 0.0]))
     walk.action("/finger/follow_curve", FollowCurve, lambda: FollowCurve.Goal(
         waypoints=[Point(x=target[0], y=target[1], z=target[2])], tolerance=0.001))
-    probe.spin_for(0.5)
+    walk.settled()
     walk.finish(len(setpoints), tmp_path)
     pub = probe.node.create_publisher(PointStamped, "/finger/target", QOS)
-    probe.spin_for(0.3)
+    probe.wait_matched(pub)
     pub.publish(point())
     probe.spin_until(lambda: setpoints, 60, "a setpoint for a valid target")
 
@@ -350,10 +392,10 @@ def test_walk_stepper_driver(launch, probe, tmp_path):
     def setpoint():
         return JointState(name=["cable_0", "cable_1", "cable_2"], position=[0.001, 0.0, 0.0])
     walk.topic("/finger/tendon_setpoints", JointState, setpoint)
-    probe.spin_for(0.5)
+    walk.settled()
     walk.finish(transcript.read_text().count(" G1 "), tmp_path)
     pub = probe.node.create_publisher(JointState, "/finger/tendon_setpoints", QOS)
-    probe.spin_for(0.3)
+    probe.wait_matched(pub)
     pub.publish(setpoint())
     probe.spin_until(lambda: " G1 " in transcript.read_text(), 10, "a G1 for a valid setpoint")
 
@@ -374,10 +416,10 @@ def test_walk_planner_node(launch, probe, library, tmp_path):
         m.twist.twist.linear.x = 0.01
         return m
     walk.topic("/frog/odom", Odometry, odom, stamped=True, settle=0.05)
-    probe.spin_for(0.6)
+    walk.settled()                                    # > 3 decision periods of 0.3 s since the walk
     walk.finish(sum(1 for p in chosen if p.id != Primitive.ID_I), tmp_path)
     pub = probe.node.create_publisher(Odometry, "/frog/odom", QOS)
-    probe.spin_for(0.3)
+    probe.wait_matched(pub)
 
     def kicked():
         m = odom()
@@ -455,7 +497,7 @@ def test_walk_observing_nodes(launch, probe, tmp_path):
     def kick():
         return LimbActivation(limbs=[1], pulse_duration=0.08)
     info_pub = probe.node.create_publisher(CameraInfo, "/camera/camera_info", QOS)
-    probe.wait_for_subscriber("/camera/camera_info", timeout=60)
+    probe.wait_matched(info_pub, timeout=60)
 
     def publish_info():
         m = info()
@@ -466,10 +508,10 @@ def test_walk_observing_nodes(launch, probe, tmp_path):
     walk = Walk(probe, "/tracker_node", tracker)
     walk.topic("/camera/camera_info", CameraInfo, info)
     publish_info()                                    # the valid model back before the images
-    probe.spin_for(0.3)
+    walk.barrier()
     walk.topic("/camera/image_raw", Image, image, stamped=True)
     walk.topic("/frog/bridge/sent", LimbActivation, kick, stamped=True)
-    probe.spin_for(0.5)
+    walk.settled()
     walk.finish(sum(not _finite(m) for m in poses + odoms), tmp_path)
 
     # -- camera_sim: odometry and shape; must not render from a non-finite pose
@@ -495,7 +537,7 @@ def test_walk_observing_nodes(launch, probe, tmp_path):
         return m
     walk.topic("/frog/sim/odom", Odometry, odom, stamped=True)
     walk.topic("/frog/sim/shape", Marker, shape, stamped=True)
-    probe.spin_for(1.0)
+    walk.settled()
     walk.finish(len(re.findall(r"RuntimeWarning|invalid value", cam_sim.log_text())), tmp_path)
 
     # -- robot_emulator: odometry for its IMU; must write no non-finite Central: Q line
@@ -504,13 +546,13 @@ def test_walk_observing_nodes(launch, probe, tmp_path):
     try:
         walk = Walk(probe, "/robot_emulator", emu)
         walk.topic("/emu/odom", Odometry, odom, stamped=True)
-        probe.spin_for(0.5)
+        walk.settled()
         _read_pty(fd, wire)
         q_lines = re.findall(rb"Central: Q[^\r\n]*", bytes(wire))
         walk.finish(sum(1 for q in q_lines if re.search(rb"nan|inf", q, re.I)), tmp_path,
                     extra_inputs=5)                        # its 5 Trigger services: no field to spoil
         pub = probe.node.create_publisher(Odometry, "/emu/odom", QOS)
-        probe.spin_for(0.3)
+        probe.wait_matched(pub)
         pub.publish(odom())                                # the detector works: a Q line for valid odometry
         probe.spin_until(lambda: _read_pty(fd, wire) or len(re.findall(rb"Central: Q", bytes(wire))) > len(q_lines),
                          5, "a Q line for valid odometry")
@@ -522,7 +564,7 @@ def test_walk_observing_nodes(launch, probe, tmp_path):
     probe.node.create_subscription(CompressedImage, "/camera/preview/compressed", previews.append, QOS)
     walk = Walk(probe, "/image_preview", preview)
     walk.topic("/preview/image_raw", Image, image, stamped=True)
-    probe.spin_for(0.5)
+    walk.settled()
     harmless = sum(1 for _, label, refused in walk.rows if not refused)
     walk.finish(max(0, len(previews) - harmless), tmp_path)
 
@@ -540,15 +582,18 @@ def test_walk_observing_nodes(launch, probe, tmp_path):
     rows = []
     for topic, typ, make in (("/walk/odom", Odometry, odom), ("/walk/limbs", LimbActivation, kick)):
         pub = probe.node.create_publisher(typ, topic, QOS)
-        probe.wait_for_subscriber(topic, timeout=30)
-        probe.spin_for(0.3)
+        probe.wait_matched(pub)
         for label, m in variants(make, stamped=True):
             pub.publish(m)
             published[topic] += 1
             rows.append((topic, label))
             probe.spin_for(0.02)
-    probe.spin_for(1.5)
     walk = Walk(probe, "/recorder", rec)
+
+    def recorded_so_far():       # the recorder's own count, in its diagnostics
+        st = next(st for m in walk.diagnostics(1) for st in m.status if st.name.startswith("recorder:"))
+        return int({kv.key: kv.value for kv in st.values}["messages"])
+    probe.spin_until(lambda: recorded_so_far() >= sum(published.values()), 120, "the recorder to hold every message")
     assert walk.alive()
     assert rec.stop() == 0 and rec.stopped_cleanly, rec.log_text()[-2000:]
     files = sorted(rec_dir.glob("walk_*.mcap"))

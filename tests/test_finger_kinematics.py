@@ -65,6 +65,29 @@ def _client(probe, srv_type, name):
     return cli
 
 
+def _solver_stats(probe, timeout=30.0):
+    """The values of kinematics_node's next diagnostics (1 Hz; published after this call began).
+
+    Hearing it through a new subscription also means the node has matched the probe's earlier
+    subscriptions, and that its executor has run past everything it had received before.
+    """
+    from diagnostic_msgs.msg import DiagnosticArray
+    got = []
+    sub = probe.node.create_subscription(
+        DiagnosticArray, "/diagnostics", lambda m: got.extend(st for st in m.status if st.name.endswith(": solver")),
+        10)
+    try:
+        probe.spin_until(lambda: got, timeout, "kinematics_node's diagnostics")
+    finally:
+        probe.node.destroy_subscription(sub)
+    return {kv.key: kv.value for kv in got[0].values}
+
+
+def _served(stats):
+    """Streamed targets dealt with: solved (one command each) or superseded before they started."""
+    return int(stats["solves"]) + int(stats["superseded_targets"])
+
+
 def _fk(core, act):
     """Tip of an actuation, cold solve (the core's default active set)."""
     mesh, fs = core
@@ -162,8 +185,9 @@ def test_targets_drive_setpoints_tip_and_shape(finger, core):
     probe.node.create_subscription(PointStamped, "/finger/tip", tips.append, QOS)
     probe.node.create_subscription(Marker, "/finger/shape", shapes.append, LATCHED)
     pub = probe.node.create_publisher(PointStamped, "/finger/target", 10)
-    probe.wait_for_subscriber("/finger/target", timeout=20)
+    probe.wait_matched(pub)
     probe.spin_until(lambda: shapes, 10, "latched shape")
+    before = _solver_stats(probe)          # (and its setpoints and tips now reach the probe)
 
     def target(p, frame="finger_base"):
         m = PointStamped()
@@ -178,13 +202,17 @@ def test_targets_drive_setpoints_tip_and_shape(finger, core):
     proc.wait_for_log(r"frame 'world' is not the base frame", timeout=10)
     proc.wait_for_log(r"target refused: .*not finite", timeout=10)
     proc.wait_for_log(r"target refused: .*max_target_distance", timeout=10)
-    probe.spin_for(0.5)
+    # refused on arrival: none reached the solver (its next diagnostics) and nothing was published
+    assert _served(_solver_stats(probe)) == _served(before)
     assert setpoints == [] and tips == []
 
     act = np.array([0.93, 0.95, 0.97])
     goal = _fk(core, act)
     target(goal)
     probe.spin_until(lambda: setpoints and tips and len(shapes) >= 2, 30, "setpoints, tip and shape")
+    # one solve for the one valid target: one command, nothing from the refused ones
+    probe.spin_until(lambda: _served(_solver_stats(probe)) >= _served(before) + 1, 30, "the solve counted")
+    assert len(setpoints) == 1 and len(tips) == 1
     sp, tip = setpoints[-1], tips[-1]
     assert sp.name == ["cable_0", "cable_1", "cable_2"]
     reached = np.array([tip.point.x, tip.point.y, tip.point.z])
@@ -203,11 +231,21 @@ def test_targets_drive_setpoints_tip_and_shape(finger, core):
     setpoints.clear()
     tips.clear()
     burst = [_fk(core, [0.93 - 0.004 * k, 0.95, 0.97]) for k in range(8)]
+    start = _solver_stats(probe)
     for p in burst:
         target(p)
     probe.spin_until(lambda: tips and np.linalg.norm(
         np.array([tips[-1].point.x, tips[-1].point.y, tips[-1].point.z]) - burst[-1]) <= LAM, 30, "last target")
-    probe.spin_for(1.0)
+    # every target of the burst solved or superseded (the node's counts): no command is to come
+    stats = {}
+
+    def dealt_with():
+        stats.update(_solver_stats(probe))
+        return _served(stats) >= _served(start) + len(burst)
+    probe.spin_until(dealt_with, 60, "the burst dealt with")
+    solved = int(stats["solves"]) - int(start["solves"])
+    probe.spin_until(lambda: len(setpoints) >= solved, 10, "a setpoint per solve")
+    assert len(setpoints) == solved
     assert len(setpoints) < len(burst), "no target was superseded"
     assert np.linalg.norm(np.array([tips[-1].point.x, tips[-1].point.y, tips[-1].point.z]) - burst[-1]) <= LAM
 
@@ -227,8 +265,13 @@ def test_follow_curve_L_feedback_per_waypoint_and_services_stay_responsive(finge
     from soft_robot_interfaces.srv import SolveIk
     from softkin_fk.core.curves import curve_L
     proc, probe = finger
-    setpoints = []
+    setpoints, feedback = [], []
     probe.node.create_subscription(JointState, "/finger/tendon_setpoints", setpoints.append, QOS)
+    # the feedback topic itself: rclpy's ActionClient drops the feedback that arrives after the
+    # result (a service reply, which overtook the last 3 of 55 feedbacks on a loaded machine)
+    probe.node.create_subscription(FollowCurve.Impl.FeedbackMessage, "/finger/follow_curve/_action/feedback",
+                                   feedback.append, QOS)
+    _solver_stats(probe)            # the node's setpoints and feedback now reach the probe
     ik = _client(probe, SolveIk, "/finger/solve_ik")
     fb = []
     t0 = time.monotonic()
@@ -242,6 +285,11 @@ def test_follow_curve_L_feedback_per_waypoint_and_services_stay_responsive(finge
     call_latency = time.monotonic() - t_call
     probe.spin_until(res_fut.done, 60, "result")
     wall = time.monotonic() - t0
+
+    def ours():
+        return [m.feedback for m in feedback if bytes(m.goal_id.uuid) == bytes(handle.goal_id.uuid)]
+    probe.spin_until(lambda: len(ours()) >= 55, 10, "the feedback of every waypoint")
+    fb = ours()
     res = res_fut.result().result
     P = curve_L()
     assert q.success and call_latency < 3.0
@@ -256,7 +304,8 @@ def test_follow_curve_L_feedback_per_waypoint_and_services_stay_responsive(finge
     acts = np.array(res.actuations).reshape(55, 3)
     for k in (0, 27, 54):   # independent FK of reported actuations
         assert _fk_matches(core, acts[k], rc[k])
-    probe.spin_for(0.5)
+    probe.spin_until(lambda: len(setpoints) >= 55, 10, "55 setpoints")
+    _solver_stats(probe)        # the node's next diagnostics: any further setpoint would be here
     assert len(setpoints) == 55
     print(f"'L' through the action: {wall:.2f} s wall ({res.solve_seconds:.2f} s solving); "
           f"SolveIk during it answered in {call_latency * 1e3:.0f} ms")
@@ -272,7 +321,7 @@ def test_follow_curve_cancel_and_bad_goals(finger):
     probe.spin_until(lambda: len(fb) >= 2, 30, "feedback")
     # a streamed target while a trajectory runs is refused (it would fight the trajectory)
     pub = probe.node.create_publisher(PointStamped, "/finger/target", 10)
-    probe.wait_for_subscriber("/finger/target", timeout=20)
+    probe.wait_matched(pub)
     m = PointStamped()
     m.header.frame_id = "finger_base"
     m.point = Point(x=0.1, y=0.055, z=0.0125)
@@ -309,7 +358,7 @@ def test_non_finite_tolerance_and_huge_counts_move_nothing(finger):
     proc, probe = finger
     setpoints = []
     probe.node.create_subscription(JointState, "/finger/tendon_setpoints", setpoints.append, QOS)
-    probe.wait_for_topic("/finger/tendon_setpoints", timeout=20)
+    _solver_stats(probe)            # the node's setpoints now reach the probe
     for goal, why in ((FollowCurve.Goal(curve="L", n_waypoints=3, tolerance=math.nan), "tolerance nan"),
                       (FollowCurve.Goal(curve="L", n_waypoints=3, tolerance=-1.0), "tolerance -1.0"),
                       (FollowCurve.Goal(curve="L", n_waypoints=3, tolerance=math.inf), "tolerance inf"),
@@ -321,13 +370,13 @@ def test_non_finite_tolerance_and_huge_counts_move_nothing(finger):
         assert out.status == GoalStatus.STATUS_ABORTED and why in out.result.message, out.result.message
     # a valid target afterwards is the only command that reaches the setpoints
     pub = probe.node.create_publisher(PointStamped, "/finger/target", 10)
-    probe.wait_for_subscriber("/finger/target", timeout=20)
+    probe.wait_matched(pub)
     m = PointStamped()
     m.header.frame_id = "finger_base"
     m.point = Point(x=0.1, y=0.055, z=0.0125)
     pub.publish(m)
     probe.spin_until(lambda: setpoints, 30, "the valid target's setpoints")
-    probe.spin_for(0.3)
+    _solver_stats(probe)            # the node's next diagnostics: a further setpoint would be here
     assert len(setpoints) == 1 and proc.running()
 
 

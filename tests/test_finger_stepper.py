@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -70,13 +71,15 @@ class Board:
         if ok:
             self.write("ok")
 
-    def silent(self, seconds):
-        got = self.read(seconds)
-        assert got is None, f"driver sent {got!r} unasked"
-
 
 def _js(names, pos):
     return JointState(name=list(names), position=[float(v) for v in pos])
+
+
+def _heard_from(probe, node):
+    """Wait for ``node``'s diagnostics (1 Hz): it has then matched the probe's earlier subscriptions."""
+    probe.wait_heard(DiagnosticArray, "/diagnostics", timeout=30,
+                     accept=lambda m: any(st.name.startswith(f"{node}:") for st in m.status))
 
 
 def _start(launch, probe, path, **params):
@@ -84,7 +87,7 @@ def _start(launch, probe, path, **params):
                                                     banner_timeout=10.0), **params))
     drv.wait_for_log("waiting for the board's banner", timeout=30)
     pub = probe.node.create_publisher(JointState, "/finger/tendon_setpoints", QOS)
-    probe.wait_for_subscriber("/finger/tendon_setpoints", timeout=20)
+    probe.wait_matched(pub, timeout=30)
     return drv, pub
 
 
@@ -104,8 +107,7 @@ def test_exact_gcode_resend_soft_limits_and_stop(launch, probe, serial_pair):
     board = Board(fd)
     states = []
     probe.node.create_subscription(JointState, "/finger/stepper_state", states.append, QOS)
-    probe.wait_for_topic("/finger/stepper_state", timeout=20)
-    probe.spin_for(0.5)
+    _heard_from(probe, "stepper_driver")    # its stepper_state now reaches the probe
     _handshake(board)
     probe.spin_until(lambda: states, 10, "stepper_state")
     assert list(states[-1].name) == JOINTS and list(states[-1].position) == [0.0, 0.0, 0.0]
@@ -133,7 +135,8 @@ def test_exact_gcode_resend_soft_limits_and_stop(launch, probe, serial_pair):
         drv.wait_for_log(why, timeout=5)
     js = JointState(name=JOINTS, position=[0.001, 0.001])   # name/position lengths differ
     pub.publish(js)
-    board.silent(1.0)
+    drv.wait_for_log(r"names \['cable_0', 'cable_1', 'cable_2'\] with 2 positions", timeout=5)
+    # nothing was sent for any of them: the next line the board reads is the next setpoint's, N9
 
     # a checksum error: the same line is sent again
     p3 = [0.004, 0.002, 0.001]
@@ -165,7 +168,20 @@ def test_exact_gcode_resend_soft_limits_and_stop(launch, probe, serial_pair):
     board.write(f"X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:{counts[0]} Y:{counts[1]} Z:{counts[2]}", "ok")
     pub.publish(_js(JOINTS, p1))
     drv.wait_for_log("the driver is stopped", timeout=5)
-    board.silent(1.0)
+    # the refused p1 was never sent: the next lines on the wire are the re-initialisation after
+    # the (halted) board's reset, and after ~/resume the next setpoint's G1 from where the motors
+    # were reported (a p1 sent late would come first, or the G1 would start from p1)
+    board.write("start")
+    drv.wait_for_log("the board reset", timeout=5)
+    board.expect(line(0, "M110 N0"))
+    board.expect(line(1, "G21"))
+    board.expect(line(2, "G90"))
+    board.expect(line(3, "G92 " + " ".join(f"{ax}{v / 80.0:.4f}" for ax, v in zip("XYZ", counts))))
+    board.expect(line(4, "M114"), ok=False)
+    board.write(f"X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:{counts[0]} Y:{counts[1]} Z:{counts[2]}", "ok")
+    assert probe.call(probe.node.create_client(Trigger, "/stepper_driver/resume"), Trigger.Request()).success
+    pub.publish(_js(JOINTS, p3))
+    board.expect(line(5, g1(p2, p3)))
     assert drv.running()
     assert drv.stop() == 0 and drv.stopped_cleanly
 
@@ -192,16 +208,16 @@ def test_board_vanishing_is_logged_and_nothing_is_replayed(launch, probe, serial
     p1 = [0.001, 0.0, 0.0]
     pub.publish(_js(JOINTS, p1))
     board.expect(line(5, g1([0, 0, 0], p1)))
+    diags = []
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
     os.close(fd)   # the board is unplugged
     drv.wait_for_log("link to the board lost", timeout=10)
     pub.publish(_js(JOINTS, [0.002, 0.0, 0.0]))
     drv.wait_for_log(r"setpoint refused: link disconnected", timeout=10)
-    time.sleep(1.0)
+    # it stays up while the port is gone: two more diagnostics updates (1 s apart) say so
+    n = len(diags)
+    probe.spin_until(lambda: len(diags) >= n + 2, 30, "two diagnostics updates while disconnected")
     assert drv.running()
-    diags = []
-    from diagnostic_msgs.msg import DiagnosticArray
-    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
-    probe.spin_until(lambda: diags, 5, "diagnostics")
     st = diags[-1].status[0]
     assert st.level == st.ERROR and st.message == "disconnected"
     assert drv.stop() == 0 and drv.stopped_cleanly
@@ -216,14 +232,16 @@ def _emulated(launch, probe, tmp_path, **driver):
                                                     settle_time=0.3, reconnect_period=0.2), **driver))
     drv.wait_for_log("board ready", timeout=30)
     pub = probe.node.create_publisher(JointState, "/finger/tendon_setpoints", QOS)
-    probe.wait_for_subscriber("/finger/tendon_setpoints", timeout=20)
+    probe.wait_matched(pub, timeout=30)
     for topic in ("/finger/emulator/move_end", "/finger/stepper_state"):
         probe.wait_for_topic(topic, timeout=20)
     return emu, drv, pub, transcript
 
 
 def _settle(probe):
-    probe.spin_for(1.5)   # let the new subscriptions match before anything is published
+    """Both nodes have matched the probe's subscriptions (made before) before anything is published."""
+    _heard_from(probe, "marlin_emulator")
+    _heard_from(probe, "stepper_driver")
 
 
 def _lines(transcript):
@@ -267,20 +285,32 @@ def test_driver_moves_the_emulated_board_in_the_feedrate_time(launch, probe, tmp
 
 def test_board_reset_and_replug_recover_without_replaying(launch, probe, tmp_path):
     emu, drv, pub, transcript = _emulated(launch, probe, tmp_path)
-    ends = []
+    ends, states = [], []
     probe.node.create_subscription(JointState, "/finger/emulator/move_end", ends.append, QOS)
+    probe.node.create_subscription(JointState, "/finger/stepper_state", states.append, QOS)
     _settle(probe)
     p = [0.002, 0.001, 0.0]
+    q = np.rint(np.array(p) * STEPS_PER_M) / STEPS_PER_M
     pub.publish(_js(JOINTS, p))
     probe.spin_until(lambda: ends, 10, "first move")
-    time.sleep(0.6)    # M400 + M114: the driver knows where the motors are
+    # M400 + M114: the driver knows where the motors are (its report is the move's end)
+    probe.spin_until(lambda: states and np.allclose(states[-1].position, q, atol=1e-12), 15, "report of the move")
     reset = probe.node.create_client(Trigger, "/marlin_emulator/reset")
     assert probe.call(reset, Trigger.Request()).success
     drv.wait_for_log("the board reset", timeout=10)
     drv.wait_for_log(r"board ready.*position set to \[2\.0", timeout=10)
-    time.sleep(0.5)
-    lines = _lines(transcript)
-    after = lines[max(i for i, ln in enumerate(lines) if "M110 N0" in ln):]   # since the re-initialisation
+
+    def since(marker):       # the transcript's lines since the last line containing marker
+        lines = _lines(transcript)
+        return lines[max(i for i, ln in enumerate(lines) if marker in ln):]
+
+    def m114s(lines):
+        return sum(" M114*" in ln for ln in lines)
+    # the re-initialisation (the second M110 N0), its M114 and a later poll (every 0.2 s) reached
+    # the board: past any replay
+    probe.spin_until(lambda: sum(" M110 N0*" in ln for ln in _lines(transcript)) >= 2
+                     and m114s(since("M110 N0")) >= 2, 15, "two M114 since the re-initialisation")
+    after = since("M110 N0")
     g92 = "G92 " + " ".join(f"{ax}{v / 80:.4f}" for ax, v in zip("XYZ", np.rint(np.array(p) * STEPS_PER_M)))
     assert any(g92 in ln for ln in after), (g92, after)
     assert not any(" G1 " in ln for ln in after), "a move was replayed after the reset"
@@ -292,7 +322,7 @@ def test_board_reset_and_replug_recover_without_replaying(launch, probe, tmp_pat
     n_before = len(_lines(transcript))
     assert probe.call(probe.node.create_client(Trigger, "/marlin_emulator/replug"), Trigger.Request()).success
     probe.spin_until(lambda: drv.log_text().count("board ready") >= 3, 15, "reconnect")
-    time.sleep(0.5)
+    probe.spin_until(lambda: m114s(_lines(transcript)[n_before:]) >= 2, 15, "two M114 since the replug")
     assert not any(" G1 " in ln for ln in _lines(transcript)[n_before:]), "a refused setpoint was sent later"
     pub.publish(_js(JOINTS, [0.003, 0.001, 0.0]))
     probe.spin_until(lambda: len(ends) >= 2, 10, "move after the replug")

@@ -1,6 +1,7 @@
 """Every custom message and service round-trips through DDS between two processes."""
 
 import math
+import time
 
 import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -53,12 +54,21 @@ def test_message_round_trip(make, launch, probe):
     received = []
     pub = probe.node.create_publisher(type(msg), "/rt/in", QOS)
     probe.node.create_subscription(type(msg), "/rt/out", received.append, QOS)
-    probe.wait_for_subscriber("/rt/in", timeout=20)
+    probe.wait_matched(pub)
     probe.wait_for_topic("/rt/out", timeout=20)
-    probe.spin_for(0.5)
-    pub.publish(msg)
-    probe.spin_until(lambda: received, timeout=10, what="relayed message")
-    assert _fields(received[0]) == _fields(msg)
+    # the relay's writer may not have matched the probe's reader yet: send again every 0.5 s
+    # until a copy comes back (every copy must equal the message)
+    sent = []
+
+    def relayed():
+        if received:
+            return True
+        if not sent or time.monotonic() - sent[-1] > 0.5:
+            pub.publish(msg)
+            sent.append(time.monotonic())
+        return False
+    probe.spin_until(relayed, timeout=30, what="relayed message")
+    assert all(_fields(r) == _fields(msg) for r in received)
     assert relay.stop() == 0
 
 

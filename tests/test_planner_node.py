@@ -18,6 +18,25 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 
 
 
+def _stamp(m):
+    return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+
+
+def _feed_until(probe, pub, predicate, timeout, what):
+    """Publish odometry 3 cm left of the line (heading along it) every 50 ms until ``predicate()``."""
+    def fed():
+        pub.publish(_odom(0.05, 0.03, 0.0))
+        return predicate()
+    return probe.spin_until(fed, timeout, what)
+
+
+def _same_tick(probe, prims, status_msg, timeout=10.0):
+    """The primitive published with ``status_msg`` (the planner stamps both of a decision alike)."""
+    probe.spin_until(lambda: any(_stamp(p) == _stamp(status_msg) for p in prims), timeout,
+                     "the primitive of the status' decision")
+    return next(p for p in prims if _stamp(p) == _stamp(status_msg))
+
+
 def _odom(x, y, yaw, v=0.01):
     m = Odometry()
     m.header.frame_id, m.child_frame_id = "tank", "frog"
@@ -38,7 +57,7 @@ def test_decides_every_period_and_reports_idle_reasons(launch, probe, library):
     probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
     odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
     node.wait_for_log("following a line path", timeout=60)
-    probe.wait_for_subscriber("/test/odom", timeout=20)
+    probe.wait_matched(odom_pub)
 
     # no odometry yet: primitive I, the state and reason in the status (no fake costs), logged once
     probe.spin_until(lambda: len(prims) >= 2 and len(status) >= 2, 10, "idle primitives")
@@ -57,29 +76,27 @@ def test_decides_every_period_and_reports_idle_reasons(launch, probe, library):
     # odometry 3 cm left of the line, heading along it: a real decision with status
     prims.clear()
     status.clear()
-    end = time.monotonic() + 3.0
-    while time.monotonic() < end:
-        odom_pub.publish(_odom(0.05, 0.03, 0.0))
-        probe.spin_for(0.1)
-    decided = [s for s in status if s.state == PlannerStatus.STATE_FOLLOWING]
-    assert decided, "no decision with a cost was published"
-    s = decided[-1]
+
+    def decided():
+        return [s for s in status if s.state == PlannerStatus.STATE_FOLLOWING]
+    _feed_until(probe, odom_pub, decided, 30, "a decision with a cost")
+    s = decided()[-1]
     assert s.distance_to_path == pytest.approx(0.03, abs=1e-3)
     assert 0.0 < s.path_progress < 0.3
     assert s.primitive_name == "ABCDEFGHI"[s.primitive_id] and s.total_cost > 0
-    assert prims[-1].id == s.primitive_id
+    assert _same_tick(probe, prims, s).id == s.primitive_id
 
     # non-finite odometry is rejected, the node keeps running
     odom_pub.publish(_odom(float("nan"), 0.0, 0.0))
     node.wait_for_log("ignored odometry with non-finite values", timeout=5)
     assert node.running()
 
-    # stale odometry (none for > 2 periods): back to I with the reason
-    prims.clear()
-    probe.spin_for(2.0)
-    node.wait_for_log(r"odometry is stale \(.* s old\); publishing primitive I", timeout=5)
-    assert prims[-1].id == Primitive.ID_I
-    assert status[-1].state == PlannerStatus.STATE_WAITING and "stale" in status[-1].message
+    # stale odometry (none for > 2 periods on the node's clock): back to I with the reason
+    node.wait_for_log(r"odometry is stale \(.* s old\); publishing primitive I", timeout=30)
+    probe.spin_until(lambda: any("stale" in s.message for s in status), 10, "a status saying stale")
+    s = next(s for s in status if "stale" in s.message)
+    assert s.state == PlannerStatus.STATE_WAITING
+    assert _same_tick(probe, prims, s).id == Primitive.ID_I
 
     # ~/stop and ~/start
     stop = probe.node.create_client(Trigger, "/planner_node/stop")
@@ -137,23 +154,25 @@ def test_frog_stop_stops_deciding_at_once(launch, probe, library):
     odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
     stop = probe.node.create_publisher(Empty, "/frog/stop", QOS)
     node.wait_for_log("following a line path", timeout=60)
-    probe.wait_for_subscriber("/frog/stop", timeout=20)
-
-    def feed(seconds):
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            odom_pub.publish(_odom(0.05, 0.03, 0.0))
-            probe.spin_for(0.05)
-    feed(1.5)
-    assert any(s.state == PlannerStatus.STATE_FOLLOWING for s in status), [s.message for s in status]
+    probe.wait_matched(stop)
+    probe.wait_matched(odom_pub)
+    _feed_until(probe, odom_pub, lambda: any(s.state == PlannerStatus.STATE_FOLLOWING for s in status), 30,
+                "a decision")
     stop.publish(Empty())
     node.wait_for_log("stop received on /frog/stop", timeout=5)
-    feed(0.6)                 # the decision already under way may still go out; then only I
-    prims.clear()
-    status.clear()
-    feed(1.5)
-    assert prims and all(p.name == "I" for p in prims)
-    assert status and all(s.state == PlannerStatus.STATE_IDLE for s in status)
+    # from the first idle status on (decisions already sent may still arrive before it), with
+    # odometry still coming: three more periods, only I (its primitives carry the status' stamps)
+    _feed_until(probe, odom_pub, lambda: any(s.state == PlannerStatus.STATE_IDLE for s in status), 10,
+                "the idle status after the stop")
+    t_idle = _stamp(next(s for s in status if s.state == PlannerStatus.STATE_IDLE))
+    after = [status, prims]
+
+    def since_idle():
+        after[:] = [[s for s in status if _stamp(s) >= t_idle], [p for p in prims if _stamp(p) >= t_idle]]
+        return len(after[0]) >= 4 and len(after[1]) >= 4
+    _feed_until(probe, odom_pub, since_idle, 30, "four periods after the stop")
+    assert all(p.name == "I" for p in after[1]), [p.name for p in after[1]]
+    assert all(s.state == PlannerStatus.STATE_IDLE for s in after[0]), [s.message for s in after[0]]
     assert node.stop() == 0
 
 
@@ -177,7 +196,7 @@ def test_odometry_with_an_old_stamp_blocks_decisions_and_is_counted(launch, prob
     probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
     odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
     node.wait_for_log("following a line path", timeout=60)
-    probe.wait_for_subscriber("/test/odom", timeout=20)
+    probe.wait_matched(odom_pub)
 
     def feed_until(make, predicate, timeout, what):
         end = time.monotonic() + timeout

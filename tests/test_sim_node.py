@@ -16,10 +16,21 @@ def _yaw(q):
     return 2 * math.atan2(q.z, q.w)
 
 
+def _stamp(m):
+    return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+
+
+def _window(probe, msgs, seconds, timeout=60.0):
+    """The messages stamped within ``seconds`` from the first one (waiting until the stamps span that)."""
+    probe.spin_until(lambda: msgs and _stamp(msgs[-1]) >= _stamp(msgs[0]) + seconds, timeout,
+                     f"{seconds} s of stamps")
+    return [m for m in msgs if _stamp(m) < _stamp(msgs[0]) + seconds]
+
+
 def test_publishes_odometry_and_shape_at_rate(launch, probe):
     sim = launch("sim_node", params={"odom_rate_hz": 50.0, "shape_rate_hz": 10.0,
                                      "initial_x": 0.2, "initial_y": -0.1,
-                                     "initial_heading": 0.5})
+                                     "initial_heading": 0.5, "publish_clock": True})   # stamps: simulated time
     odom, shape = [], []
     probe.node.create_subscription(Odometry, "/frog/sim/odom", odom.append, QOS)
     probe.node.create_subscription(Marker, "/frog/sim/shape", shape.append, QOS)
@@ -27,8 +38,11 @@ def test_publishes_odometry_and_shape_at_rate(launch, probe):
     sim.wait_for_log("simulating the frog", timeout=120)
     odom.clear()
     shape.clear()
-    probe.spin_for(3.0)
-    # 50 Hz in simulated time at real-time factor 1: about 150 messages in 3 s
+    # 50 Hz in simulated time: about 150 messages in 3 s, counted on the simulated-time stamps
+    # (on the wall clock, arrivals or system-time stamps, a loaded sim catching up after a stall
+    # put 172 in 3 s)
+    odom[:] = _window(probe, odom, 3.0)
+    shape[:] = _window(probe, shape, 3.0)
     assert 100 <= len(odom) <= 170, len(odom)
     assert 20 <= len(shape) <= 35, len(shape)
     m = odom[-1]
@@ -46,15 +60,15 @@ def test_publishes_odometry_and_shape_at_rate(launch, probe):
 
 def test_primitive_moves_the_frog_and_bad_commands_are_rejected(launch, probe):
     from soft_robot_interfaces.msg import LimbActivation, Primitive
-    sim = launch("sim_node", params={"real_time_factor": 2.0})
+    sim = launch("sim_node", params={"real_time_factor": 2.0, "publish_clock": True})   # stamps: simulated time
     odom = []
     probe.node.create_subscription(Odometry, "/frog/sim/odom", odom.append, QOS)
     prim_pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     limb_pub = probe.node.create_publisher(LimbActivation, "/frog/limb_activation", QOS)
     probe.wait_for_topic("/frog/sim/odom", timeout=120)
     sim.wait_for_log("simulating the frog", timeout=120)
-    probe.wait_for_subscriber("/frog/primitive", timeout=20)
-    probe.spin_for(0.5)
+    probe.wait_matched(prim_pub)
+    probe.wait_matched(limb_pub)
 
     # a name that contradicts the id is rejected
     prim_pub.publish(Primitive(id=1, name="C"))
@@ -66,10 +80,11 @@ def test_primitive_moves_the_frog_and_bad_commands_are_rejected(launch, probe):
     limb_pub.publish(LimbActivation(limbs=[0], pulse_duration=float("nan")))
     sim.wait_for_log(r"rejected limb activation: pulse_duration", timeout=10)
     assert sim.running()
-    start = odom[-1].pose.pose.position
+    probe.spin_until(lambda: odom, 30, "odometry")
+    start, t_start = odom[-1].pose.pose.position, _stamp(odom[-1])
 
     prim_pub.publish(Primitive(id=Primitive.ID_B, name="B"))   # all four limbs: forward
-    probe.spin_for(2.0)   # 4 simulated seconds
+    probe.spin_until(lambda: _stamp(odom[-1]) >= t_start + 4.0, 60, "4 simulated seconds")
     end = odom[-1].pose.pose.position
     moved = math.hypot(end.x - start.x, end.y - start.y)
     assert moved > 2e-3, f"primitive B moved the frog only {moved * 1e3:.2f} mm"

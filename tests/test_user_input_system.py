@@ -26,6 +26,30 @@ def _image(width, height, stamp_s, fill=0):
     return msg
 
 
+def _heard_from(probe, node):
+    """``node``'s diagnostics (1 Hz) heard: it has matched the probe's earlier subscriptions."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    probe.wait_heard(DiagnosticArray, "/diagnostics", timeout=30,
+                     accept=lambda m: any(st.name.startswith(f"{node}:") for st in m.status))
+
+
+def _until_logged(probe, proc, pattern, send, timeout=15.0, every=0.1):
+    """Call ``send()`` every ``every`` s until ``proc``'s log matches ``pattern``."""
+    import re
+    rx = re.compile(pattern)
+    last = [0.0]
+
+    def logged():
+        if rx.search(proc.log_text()):
+            return True
+        assert proc.running(), proc.log_text()[-2000:]
+        if time.monotonic() - last[0] >= every:
+            send()
+            last[0] = time.monotonic()
+        return False
+    probe.spin_until(logged, timeout, f"{proc.name} to log {pattern!r}")
+
+
 def trigger(probe, service, timeout=15.0):
     client = probe.node.create_client(Trigger, service)
     probe.wait_for_service(client, timeout=15)
@@ -41,8 +65,8 @@ def test_image_preview_refuses_an_empty_image_and_stays_up(launch, probe):
     out = []
     probe.node.create_subscription(CompressedImage, "/camera/preview/compressed", out.append, QOS)
     pub = probe.node.create_publisher(Image, "/camera/image_raw", QoSProfile(depth=2))
-    probe.wait_for_subscriber("/camera/image_raw")
-    probe.spin_for(0.3)
+    probe.wait_matched(pub)
+    _heard_from(probe, "image_preview")
     pub.publish(_image(0, 0, 10.0))
     node.wait_for_log("empty image", timeout=10)
     pub.publish(_image(64, 48, 11.0))
@@ -58,9 +82,8 @@ def test_image_preview_delivers_rate_hz_from_a_30fps_camera(launch, probe):
     out = []
     probe.node.create_subscription(CompressedImage, "/camera/preview/compressed", out.append, QOS)
     pub = probe.node.create_publisher(Image, "/camera/image_raw", QoSProfile(depth=2))
-    probe.wait_for_subscriber("/camera/image_raw")
-    probe.wait_for_topic("/camera/preview/compressed")
-    probe.spin_for(0.5)
+    probe.wait_matched(pub)
+    _heard_from(probe, "image_preview")
     frame = _image(640, 480, 0.0, fill=90)
     t0 = time.monotonic()
     n_frames = 0
@@ -72,8 +95,13 @@ def test_image_preview_delivers_rate_hz_from_a_30fps_camera(launch, probe):
         frame.header.stamp.nanosec = int((stamp - int(stamp)) * 1e9)
         pub.publish(frame)
         probe.spin_until(lambda: time.monotonic() - t0 >= n_frames / 30.0, 1.0)
-    probe.spin_for(1.0)
-    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in out]
+    # a last frame far later on the stamp grid is passed on for sure: once its preview is here,
+    # every preview of the stream is (one writer, in order)
+    last = 100.0 + n_frames / 30.0 + 10.0
+    frame.header.stamp.sec, frame.header.stamp.nanosec = int(last), int((last - int(last)) * 1e9)
+    pub.publish(frame)
+    probe.spin_until(lambda: out and out[-1].header.stamp.sec == int(last), 30, "the preview of the last frame")
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in out[:-1]]
     span = n_frames / 30.0
     rate = len(stamps) / span
     assert rate == pytest.approx(5.0, rel=0.1), (len(stamps), n_frames, span)
@@ -223,22 +251,20 @@ def test_camera_sim_refuses_nonfinite_and_unstamped_odometry(launch, probe):
     probe.node.create_subscription(Image, "/camera/image_raw", images.append, QoSProfile(depth=2))
     probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
     pub = probe.node.create_publisher(Odometry, "/frog/sim/odom", QOS)
-    probe.wait_for_subscriber("/frog/sim/odom")
-    probe.spin_for(0.3)
-    for _ in range(10):
-        pub.publish(_odom(probe, x=float("nan")))
-        probe.spin_for(0.1)
-    cam.wait_for_log(r"frog/sim/odom refused: pose.pose.position.x is nan", timeout=10)
-    for _ in range(30):                              # past the 2 s log throttle
-        pub.publish(_odom(probe, stamp=False))
-        probe.spin_for(0.1)
-    cam.wait_for_log(r"frog/sim/odom refused: header.stamp is zero \(unstamped\)", timeout=10)
+    probe.wait_matched(pub)
+    _heard_from(probe, "camera_sim")                 # a rendered image would reach the probe
+    _until_logged(probe, cam, r"frog/sim/odom refused: pose.pose.position.x is nan",
+                  lambda: pub.publish(_odom(probe, x=float("nan"))))
+    _until_logged(probe, cam, r"frog/sim/odom refused: header.stamp is zero \(unstamped\)",
+                  lambda: pub.publish(_odom(probe, stamp=False)))
 
     def refusal_reported():
-        return any("refused" in s.message and s.level != b"\x00" for m in diags for s in m.status
-                   if "camera simulator" in s.name)
+        return [s for m in diags for s in m.status
+                if "camera simulator" in s.name and "refused" in s.message and s.level != b"\x00"]
     probe.spin_until(refusal_reported, 10, "diagnostics reporting the refusal")
-    assert images == [] and "RuntimeWarning" not in cam.log_text()
+    # nothing was rendered up to that report (the node's count) and nothing reached the probe
+    frames = {kv.key: kv.value for kv in refusal_reported()[-1].values}["frames"]
+    assert frames == "0" and images == [] and "RuntimeWarning" not in cam.log_text()
     assert cam.running()
 
 
@@ -252,7 +278,7 @@ def test_robot_emulator_never_streams_nan_quaternions_and_bridge_names_the_bad_n
     import tty
     tty.setraw(fd)
     pub = probe.node.create_publisher(Odometry, "/frog/sim/odom", QOS)
-    probe.wait_for_subscriber("/frog/sim/odom")
+    probe.wait_matched(pub)
     received = bytearray()
 
     def read():
@@ -350,7 +376,7 @@ def test_stepper_driver_reports_a_halted_board_until_it_resets(launch, probe, tm
         link_state.extend((s.level, s.message) for s in msg.status if "Marlin link" in s.name)
     probe.node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, QOS)
     pub = probe.node.create_publisher(JointState, "/finger/tendon_setpoints", QOS)
-    probe.wait_for_subscriber("/finger/tendon_setpoints", timeout=20)
+    probe.wait_matched(pub)
     assert trigger(probe, "/marlin_emulator/inject_error").success       # "Printer halted. kill() called!"
     drv.wait_for_log(r"board halted \(Error:Printer halted. kill\(\) called!\)", timeout=10)
     probe.spin_until(lambda: link_state and link_state[-1][1].startswith("halted"), 10, "diagnostics: halted")
@@ -385,7 +411,7 @@ def test_sim_real_time_factors_are_measured_from_a_live_change(launch, probe):
     probe.node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, QOS)
     launch("sim_node", params={"real_time_factor": 0.0})        # as fast as it can: compute-bound
     probe.spin_until(lambda: diag and float(diag[-1][1]["sim_time_s"]) > 0, 90, "the simulation running")
-    probe.spin_for(3.0)
+    probe.spin_for(3.0)      # deliberately: 3 s flat out before the change, which a from-start figure would mix in
     assert _set_param(probe, "/sim_node", "real_time_factor", 0.5).successful
     t_set = time.monotonic()
     probe.spin_until(lambda: diag and diag[-1][0] > t_set + 2.5, 10, "diagnostics after the change")
@@ -411,14 +437,27 @@ def test_latched_path_is_stamped_on_simulated_time(launch, probe, library):
     from rosgraph_msgs.msg import Clock
     launch("planner_node", params={"library_file": str(library), "period": 0.3, "use_sim_time": True})
     clock = probe.node.create_publisher(Clock, "/clock", 10)
-    probe.wait_for_subscriber("/clock", timeout=60)
-    t = 5.0
-    for _ in range(15):
-        t += 0.1
-        clock.publish(Clock(clock=_image(1, 1, t).header.stamp))
-        probe.spin_for(0.1)
-    paths = []
+    probe.wait_matched(clock, timeout=60)
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    paths = []
     probe.node.create_subscription(Path, "/frog/path", paths.append, latched)
-    probe.spin_until(lambda: paths, 10, "the latched path")
-    assert paths[-1].header.stamp.sec >= 5 and len(paths[-1].poses) > 1
+    t = [5.0]
+
+    def tick():          # simulated time runs (0.1 s per 0.1 s) until the path is stamped on it
+        t[0] += 0.1
+        clock.publish(Clock(clock=_image(1, 1, t[0]).header.stamp))
+        return paths and paths[-1].header.stamp.sec >= 5
+    _until_true(probe, tick, 60, "the path stamped on simulated time")
+    late = []            # and a late subscriber gets that one, latched
+    probe.node.create_subscription(Path, "/frog/path", late.append, latched)
+    probe.spin_until(lambda: late, 10, "the latched path")
+    assert late[-1].header.stamp.sec >= 5 and len(late[-1].poses) > 1
+
+
+def _until_true(probe, step, timeout, what, every=0.1):
+    """Call ``step()`` every ``every`` s (spinning between) until it returns true."""
+    end = time.monotonic() + timeout
+    while not step():
+        if time.monotonic() > end:
+            raise TimeoutError(f"{what} not reached within {timeout} s")
+        probe.spin_for(every)

@@ -60,8 +60,7 @@ def test_read_write_unplug_replug(device):
         assert sup.state is LinkState.DISCONNECTED
         assert link.write_line(b"h 1\n") == "port is not open"
         events.clear()
-        time.sleep(0.35)                               # a few failed retries (no such file)
-        assert any(e.kind == "open_failed" for e in collect())
+        assert wait_for(lambda: any(e.kind == "open_failed" for e in collect()))   # retries fail: no such file
         device.write(b"stale\n")                      # dropped: unplugged devices take nothing
         device.plug()
         assert wait_for(lambda: any(e.kind == "opened" for e in collect()), 1.0)

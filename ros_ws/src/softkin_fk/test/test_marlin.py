@@ -163,3 +163,22 @@ def test_sender_window_keeps_taken_lines_in_flight_on_resend():
     assert [s.on_ok() for _ in range(3)] == ["G21", "G90", "M114"]
     assert s.sendable() == [frame_line(4, "M400")]
     assert not s.on_resend(99)      # a line never sent cannot be resent
+
+
+def test_a_resend_for_the_numbering_before_a_reset_keeps_the_queue():
+    """A poll written just before the board reset is answered after the host has reset its
+    numbering ('Resend: 1' from the fresh board): the re-initialisation queued must survive."""
+    s = GcodeSender(window=1)
+    s.enqueue("M114")
+    assert s.sendable() == [frame_line(0, "M110 N0")]
+    s.on_ok()
+    assert s.sendable() == [frame_line(1, "M114")]       # in flight when the board resets
+    s.reset()                                             # the host sees the start banner
+    for c in ("G21", "G90", "G92 X2.5500 Y1.2750 Z0.0000", "M114"):
+        s.enqueue(c)
+    assert s.on_resend(1)                                 # the fresh board's answer to N1
+    assert s.queue_depth == 5 and s.resends == 0
+    assert s.sendable() == [frame_line(0, "M110 N0")]
+    for n, c in enumerate(("G21", "G90", "G92 X2.5500 Y1.2750 Z0.0000", "M114"), start=1):
+        s.on_ok()
+        assert s.sendable() == [frame_line(n, c)]

@@ -202,7 +202,14 @@ class GcodeSender:
         return self.sent.get(n, 'unnumbered')
 
     def on_resend(self, number: int) -> bool:
-        """``Resend: number``: send lines from ``number`` again; False if it is no longer known."""
+        """``Resend: number``: send lines from ``number`` again; False if it is no longer known.
+
+        Nothing sent since :meth:`reset`: the request is about a line of the numbering before
+        it (one written just before the board reset, answered after); the queued ``M110 N0``
+        sets the numbering anew, so there is nothing to resend and nothing to drop.
+        """
+        if not self.sent:
+            return True
         if number not in self.sent:
             if number == self.next_number:
                 # the board expects the line after all we numbered: it is in sync (a garbled

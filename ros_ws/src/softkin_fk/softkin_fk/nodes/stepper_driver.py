@@ -190,6 +190,8 @@ class StepperDriver(Node):
     def _srv_resume(self, req, res):
         with self._lock:
             self._stopped = False
+            if self.state == "stopped":   # (re)initialised while stopped: the link is ready
+                self.state = "ready"
             if self.reported is not None:
                 self.commanded = self.reported.copy()   # M410 left the plan where the motors stopped
         self.get_logger().info("resumed: setpoints are accepted again")
