@@ -334,3 +334,61 @@ def test_ctrl_c_during_preflight_ends_at_once_without_actuation(video, library, 
             proc.kill()
     assert proc.returncode == 2 and "interrupted (Ctrl-C) during the pre-flight" in stderr, stdout + stderr
     assert time.monotonic() - t_int < 40, "the pre-flight did not end at Ctrl-C"
+
+
+def test_killed_tracker_is_restarted_and_the_run_goes_on(video, library, launch, ros_domain, probe, tmp_path):
+    """Supervision in real mode (issue 22): SIGKILL of tracker_node while following; frog-twin restarts it
+    with back-off (the tag-lost timeout does not count its downtime), poses come back, the planner follows
+    again, and /frog/stop then ends the run with the restart in the report."""
+    import signal
+    from geometry_msgs.msg import PoseStamped
+    from soft_robot_interfaces.msg import PlannerStatus
+    from std_msgs.msg import Empty
+    link = _start_emulator(launch, tmp_path)
+    out = tmp_path / "real"
+    poses, following = [], []
+    probe.node.create_subscription(PoseStamped, "/frog/pose", lambda m: poses.append(time.monotonic()), 10)
+    probe.node.create_subscription(
+        PlannerStatus, "/frog/planner/status",
+        lambda m: following.append(time.monotonic()) if m.state == PlannerStatus.STATE_FOLLOWING else None, 10)
+    pub = probe.node.create_publisher(Empty, "/frog/stop", 10)
+    args = _real_args(video, link, library, out, ros_domain.domain_id, duration=150, tag_lost_timeout=2)
+    log = tmp_path / "frog_twin.out"
+    with open(log, "w") as fh:
+        proc = subprocess.Popen(["frog-twin", *map(str, args)], env=ros_domain.env, stdout=fh,
+                                stderr=subprocess.STDOUT, text=True)
+        try:
+            probe.spin_until(lambda: following or proc.poll() is not None, 240, "the planner following")
+            assert proc.poll() is None, log.read_text()[-3000:]
+            tracker = _node_pid("tracker_node", ros_domain.domain_id)
+            assert tracker is not None
+            os.kill(tracker, signal.SIGKILL)
+            t_kill = time.monotonic()
+            probe.spin_until(lambda: "supervisor: tracker_node restarted" in log.read_text()
+                             or proc.poll() is not None, 60, "the tracker's restart")
+            assert proc.poll() is None, log.read_text()[-3000:]
+            # the restarted tracker tracks (more than the 2 s tag-lost timeout after the kill on a loaded
+            # machine: its downtime is not the tag lost), and the planner follows on its poses
+            probe.spin_until(lambda: len([t for t in poses if t > t_kill]) >= 5 or proc.poll() is not None,
+                             90, "poses from the restarted tracker")
+            t_back = min(t for t in poses if t > t_kill)
+            probe.spin_until(lambda: any(t > t_back for t in following) or proc.poll() is not None, 30,
+                             "the planner following again")
+            assert proc.poll() is None, log.read_text()[-3000:]
+            probe.spin_until(lambda: pub.get_subscription_count() >= 3, 30, "/frog/stop matched")
+            for _ in range(5):
+                pub.publish(Empty())
+                probe.spin_for(0.05)
+            proc.wait(timeout=180)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    text = log.read_text()
+    assert proc.returncode == 0, text[-3000:]
+    assert "supervisor: tracker_node exited (SIGKILL): restart 1 in 1.0 s" in text, text[-3000:]
+    assert "stopped (stop received on /frog/stop)" in text, text[-2000:]
+    (m,) = json.loads((out / "metrics.json").read_text())
+    assert m["stop_reason"] == "stop received on /frog/stop"
+    assert m["supervision"]["restarts"]["tracker_node"] == 1
+    assert sum(m["supervision"]["restarts"].values()) == 1, m["supervision"]
+    assert (out / "line" / "tracker_node.1.log").exists()

@@ -116,6 +116,34 @@ def test_true_pose_on_tf(launch, probe):
     assert sim.stop() == 0
 
 
+def test_odom_alias_as_a_turned_tag_reports_it(launch, probe):
+    """odom_alias_yaw: the alias is the truth seen in a frame turned by the yaw on the body (heading + yaw,
+    the body twist rotated into that frame, the position unchanged), stamp by stamp."""
+    yaw = 0.3
+    sim = launch("sim_node", params={"odom_alias_topic": "frog/odom", "odom_alias_yaw": yaw, "initial_heading": 0.5,
+                                     "gait_frequency_hz": 1.0, "publish_clock": True})
+    truth, alias = {}, {}
+    probe.node.create_subscription(Odometry, "/frog/sim/odom", lambda m: truth.setdefault(_stamp(m), m), QOS)
+    probe.node.create_subscription(Odometry, "/frog/odom", lambda m: alias.setdefault(_stamp(m), m), QOS)
+    # swimming (a twist to rotate): 2 s of simulated time in both
+    probe.spin_until(lambda: len(set(truth) & set(alias)) > 100, 120, "odometry on both topics")
+    both = sorted(set(truth) & set(alias))
+    moving = 0
+    for t in both:
+        a, b = truth[t], alias[t]
+        assert (b.pose.pose.position.x, b.pose.pose.position.y) == (a.pose.pose.position.x, a.pose.pose.position.y)
+        assert math.remainder(_yaw(b.pose.pose.orientation) - _yaw(a.pose.pose.orientation) - yaw, 2 * math.pi) \
+            == pytest.approx(0.0, abs=1e-9)
+        u, v = a.twist.twist.linear.x, a.twist.twist.linear.y
+        # the same velocity vector in the world: R(heading) (u, v) = R(heading + yaw) (u', v')
+        assert b.twist.twist.linear.x == pytest.approx(math.cos(yaw) * u + math.sin(yaw) * v, abs=1e-12)
+        assert b.twist.twist.linear.y == pytest.approx(-math.sin(yaw) * u + math.cos(yaw) * v, abs=1e-12)
+        assert b.twist.twist.angular.z == a.twist.twist.angular.z
+        moving += math.hypot(u, v) > 1e-3
+    assert moving > 10, "the gait never moved the frog"
+    assert sim.stop() == 0
+
+
 def test_paused_stalls_the_simulation_and_clock_then_continues(launch, probe):
     """paused (the fault injector's clock stall): no /clock, odometry or simulation while true; afterwards the
     time continues from where it stopped (no jump to catch up)."""

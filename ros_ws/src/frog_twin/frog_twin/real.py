@@ -13,7 +13,8 @@ deciding, the bridge cancels its scheduled pulses and refuses new ones until
 ``~/clear_emergency``) and a sender must not wait for any of them to answer; any tool can
 send it (``ros2 topic pub --once /frog/stop std_msgs/msg/Empty``). ``frog-twin`` itself
 sends it on Ctrl-C, when the tag has been lost for longer than ``--tag-lost-timeout``,
-when a node of the loop dies, at the goal and at ``--duration``; then it writes the same
+when a node of the loop is out of restarts (a crashed node is restarted with back-off, as in
+the twin), at the goal and at ``--duration``; then it writes the same
 report as the twin (trajectory PNG, MP4 with the overlay, JSON, MCAP), measured on the
 tracked pose since there is no ground truth.
 """
@@ -275,10 +276,24 @@ def preflight(args, watch: RealWatch, procs, path, timeout: float = PREFLIGHT_TI
     return checks
 
 
+#: Nodes whose downtime (a crash until the restarted node's first pose) is not the tag lost:
+#: the pose comes through them. The planner decides nothing on a stale pose meanwhile.
+VISION_NODES = ("camera_node", "tracker_node")
+#: How long a restarted vision node may take to deliver its first pose (a Python node's
+#: start-up, DDS discovery, the camera opening) before the tag counts as lost [s].
+VISION_RESTART_GRACE_S = 20.0
+
+
 def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
-    """One run on the real robot: pre-flight, follow, stop, report. Raises PreflightError."""
-    from frog_twin.twin import stop_processes
+    """One run on the real robot: pre-flight, follow, stop, report. Raises PreflightError.
+
+    While following, a node that exits is restarted with back-off (:class:`Supervisor`, as in
+    the twin; a planner resumes at its progress); out of restarts, the run stops with the reason.
+    """
     from soft_robot_common.processes import acquire_domain
+    from soft_robot_common.supervision import RestartPolicy, Supervisor
+
+    from frog_twin.twin import _restarter
     out.mkdir(parents=True, exist_ok=True)
     graph = real_graph(args, name, out, path_settings, settings)
     path = path_settings.build()
@@ -290,16 +305,18 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
         domain = RosDomain(args.domain, env)
     else:
         domain = acquire_domain()
-    procs = []
     watch = RealWatch(domain)
+    supervisor = Supervisor(RestartPolicy(), log=lambda s: print("  " + s, flush=True))
+    reference = None             # the reference sim_node: outside the loop, not supervised
     interrupted = watch.interrupted
     previous = signal.signal(signal.SIGINT, lambda *_: interrupted.append("Ctrl-C"))
     reason = None
     t_start = None
     try:
         for node in graph:
-            procs.append(node.start(domain.env, out))
-        checks = preflight(args, watch, procs, path, args.preflight_timeout)
+            supervisor.add(node.name, node.start(domain.env, out), _restarter(node, domain, out, watch.base))
+        # before the start a node's exit fails the pre-flight (nothing restarts it: nothing to resume)
+        checks = preflight(args, watch, supervisor.processes(), path, args.preflight_timeout)
         for c in checks:
             print(f"  pre-flight {c.name:11s} {'ok  ' if c.ok else 'FAIL'} {c.message}", flush=True)
         (out / "preflight.json").write_text(json.dumps([c.__dict__ for c in checks], indent=1) + "\n")
@@ -309,30 +326,39 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
         if failed:
             raise PreflightError(failed)
         if args.reference_sim:
-            procs.append(reference_sim_node(args, watch.poses[-1][1:]).start(domain.env, out))
+            reference = reference_sim_node(args, watch.poses[-1][1:]).start(domain.env, out)
         recorded = ("/frog/odom", "/frog/primitive", "/frog/planner/status")
         watch.base.wait(lambda: watch.base.subscribed("recorder", recorded), 30,
-                        "the recorder subscribed to the loop's topics", procs)
+                        "the recorder subscribed to the loop's topics", supervisor.processes())
         watch.base.start_planner()
         t_start = time.monotonic()
         print(f"  {name}: following on the real robot (at most {args.duration:.0f} s; Ctrl-C or "
               f"/frog/stop stops)", flush=True)
+        restarting = None         # a vision node was down at this time and no pose has come since
         while reason is None:
             watch.spin(0.05)
             now = time.monotonic()
-            dead = [p for p in procs if not p.running()]
+            down = supervisor.poll(now)
+            if any(n in supervisor.names() and supervisor.down(n) for n in VISION_NODES):
+                restarting = now
+            last_pose = max(t_start, watch.poses[-1][0] if watch.poses else t_start)
+            if restarting is not None and last_pose > restarting:
+                restarting = None
+            lost = (now - restarting > VISION_RESTART_GRACE_S if restarting is not None
+                    else now - last_pose > args.tag_lost_timeout)
             if interrupted:
                 reason = "Ctrl-C"
             elif watch.stops:
                 reason = "stop received on /frog/stop"
-            elif dead:
-                reason = "; ".join(f"{p.name} died (code {p.proc.returncode})" for p in dead)
+            elif down:
+                reason = down
             elif watch.base.state == watch.base.Status.STATE_GOAL_REACHED:
                 reason = "goal reached"
             elif now - t_start > args.duration:
                 reason = f"duration {args.duration:g} s"
-            elif now - (watch.poses[-1][0] if watch.poses else t_start) > args.tag_lost_timeout:
-                reason = f"tag lost for more than {args.tag_lost_timeout:g} s"
+            elif lost:
+                reason = (f"tag lost for more than {args.tag_lost_timeout:g} s" if restarting is None else
+                          f"no pose within {VISION_RESTART_GRACE_S:g} s of a vision node's restart")
         watch.stop_all()
         t_stop = time.monotonic()
         print(f"  {name}: stopped ({reason})", flush=True)
@@ -341,18 +367,25 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
         if reason is None:
             watch.stop_all()
         signal.signal(signal.SIGINT, previous)
-        stop_processes(procs)
+        supervisor.stop_all()
+        if reference is not None and reference.running():
+            reference.stop()
         watch.close()
         domain.release()
-    return real_report(args, name, out, settings, path_settings, reason, t_stop - t_start, checks)
+    metrics = real_report(args, name, out, settings, path_settings, reason, t_stop - t_start, checks,
+                          supervisor.summary())
+    return metrics
 
 
-def real_report(args, name, out, settings, path_settings, reason, wall, checks) -> dict:
+def real_report(args, name, out, settings, path_settings, reason, wall, checks, supervision=None) -> dict:
     """The twin's report of a real run, on the tracked pose (the only trajectory there is)."""
     from frog_planner.core.settings import as_dict
+
+    from frog_twin.core.twin_recording import readable_files
     files = sorted((out / "recording").glob("*.mcap"))
     if not files:
         raise RuntimeError(f"no recording in {out / 'recording'}; see {out}/recorder.log")
+    files = readable_files(files, out / "recovered")    # a killed recorder's file, recovered
     rec = read_twin_recording(files)
     predicted = rec.truth         # the reference sim_node's frog/sim/odom, if it ran
     rec.truth = rec.tracked       # no ground truth on the real robot: the camera's track is the trajectory
@@ -370,7 +403,7 @@ def real_report(args, name, out, settings, path_settings, reason, wall, checks) 
     metrics["vision"] = {"n": int(len(rec.tracked)), "rate_hz": float(
         len(rec.tracked) / max(rec.tracked[-1, 0] - rec.tracked[0, 0], 1e-9)) if len(rec.tracked) > 1 else 0.0}
     metrics.update(mode="real", trajectory="tracked (camera + tracker); no ground truth", stop_reason=reason,
-                   wall_time_s=wall, recording=[str(f) for f in files],
+                   wall_time_s=wall, recording=[str(f) for f in files], supervision=supervision,
                    preflight=[c.__dict__ for c in checks],
                    settings={"planner": as_dict(settings), "path": as_dict(path_settings),
                              "robot_port": str(args.robot_port), "camera": str(args.camera),

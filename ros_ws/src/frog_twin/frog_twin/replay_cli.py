@@ -68,12 +68,16 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
     x0, y0, h0 = setup.start_pose
     print(f"replay {progress}{setup.name}: period {setup.period:.4f} s, start ({x0:.3f}, {y0:.3f}) m "
           f"{math.degrees(h0):.1f} deg, tag offset {math.degrees(setup.tag_offset):+.1f} deg "
-          f"({setup.tag_offset_source}); planner {'paper' if args.paper_cost else 'project'}; "
+          f"({setup.tag_offset_source}), twin's tag {'aligned' if args.aligned_tag else 'turned as mounted'}; planner {'paper' if args.paper_cost else 'project'}; "
           f"at most {duration:.0f} s simulated", flush=True)
     twins, tracks = [], []
+    # the robot's planner saw the tag's heading, body heading - offset: the twin's tag is mounted
+    # so (camera_sim tag_yaw, or the vision-free alias), and its tracker calibrates no offset either
+    tag_yaw = 0.0 if args.aligned_tag else -setup.tag_offset
     for seed in args.seed_list:
         a = copy.copy(args)
         a.seed = seed
+        a.tag_yaw = tag_yaw
         label = setup.name if len(args.seed_list) == 1 else f"{setup.name}_s{seed}"
         rec, tm = run_twin(a, label, folder / label, path_settings, setup.start_pose, settings, duration)
         t0 = tm["start_time_s"]
@@ -99,7 +103,7 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
               "rows": rows, "plot": str(png),
               "settings": {"vision": not args.no_vision, "serial": not args.direct, "seeds": args.seed_list,
                            "real_time_factor": args.real_time_factor, "limb_strength_sd": args.limb_strength_sd,
-                           "kick_strength_sd": args.kick_strength_sd,
+                           "kick_strength_sd": args.kick_strength_sd, "tag_yaw_rad": tag_yaw,
                            "duration_s": duration, "library": str(args.library)},
               "units": {"distance": "m (rows: cm)", "time": "s from the first decision", "speed": "m/s"}}
     (folder / f"{setup.name}_replay.json").write_text(json.dumps(result, indent=1, default=float) + "\n")

@@ -125,15 +125,6 @@ def ensure_library(path: Path, states: int, horizon: float = 3.0) -> Path:
     return path
 
 
-def stop_processes(procs) -> None:
-    """Stop the run's node processes in reverse start order; warn for any that did not exit 0."""
-    for p in reversed(procs):
-        if p.running():
-            code = p.stop()
-            if code not in (0, None):
-                print(f"  warning: {p.name} exited with {code}; log {p.log_path}")
-
-
 def _library_model_differs(path: Path) -> str:
     """'' if the library's robot model is today's default, else the first differing parameter."""
     from frog_sim.core.model_parameters import FrogParameters
@@ -236,17 +227,19 @@ SERIAL_NODES = ("robot_emulator", "bridge_node")
 def twin_graph(args, name: str, out: Path, path_settings, settings, start_pose, graph_file=GRAPH_FILE):
     """The twin's processes for one run: the graph file's sim mode with this run's values."""
     x0, y0, h0 = start_pose
+    tag_yaw = float(getattr(args, "tag_yaw", 0.0))      # the tag as mounted (a hardware replay sets it)
     overrides = {
         "recorder": {"output_dir": str(out / "recording"), "file_prefix": name},
         "sim_node": {"real_time_factor": args.real_time_factor, "initial_x": x0, "initial_y": y0,
                      "initial_heading": h0, "execute_primitives": args.direct,
                      "odom_alias_topic": "frog/odom" if args.no_vision else "",
+                     "odom_alias_yaw": tag_yaw if args.no_vision else 0.0,
                      "limb_strength_sd": args.limb_strength_sd, "kick_strength_sd": args.kick_strength_sd,
                      "seed": args.seed},
         "planner_node": {"library_file": str(args.library), **as_dict(settings), **as_dict(path_settings)},
     }
     if not args.no_vision:
-        overrides["camera_sim"] = {"seed": args.seed}
+        overrides["camera_sim"] = {"seed": args.seed, "tag_yaw": tag_yaw}
         # best effort in the twin: a reliable 0.9 MB-frame reader beside the tracker slows the
         # camera's delivery to the tracker on 2 cores (12.5 instead of > 15 Hz tracked); the
         # preview only needs 5 of the 30 frames a second
@@ -575,6 +568,9 @@ def main(argv=None) -> int:
                     help="twin runs per log with seeds --seed, --seed+1, ... (pooled in the summary)")
     rg.add_argument("--tag-offset-deg", type=float, default=None,
                     help="body heading - tag theta [deg] (default: estimated on the folder's line runs)")
+    rg.add_argument("--aligned-tag", action="store_true",
+                    help="draw the twin's tag aligned with the body (the planner then sees the true heading); "
+                         "default: turned by -offset as on the robot, whose planner saw the tag's heading")
     ap.add_argument("--real-time-factor", type=float, default=1.0,
                     help="simulated seconds per wall second (all nodes follow /clock)")
     ap.add_argument("--seed", type=int, default=1, help="seed of every random element (noise, BLE jitter, limbs)")
@@ -673,8 +669,8 @@ def main(argv=None) -> int:
         args.path = args.path or "all"
         if args.path not in (*PATH_NAMES, "all"):
             ap.error(f"--path {args.path!r}: expected one of {', '.join(PATH_NAMES)}, all (or --replay RUN.csv)")
-        if args.paper_cost or args.tag_offset_deg is not None or (args.seeds != 1 and not args.fault_campaign):
-            ap.error("--paper-cost and --tag-offset-deg go with --replay / --replay-all, --seeds also with "
+        if args.paper_cost or args.tag_offset_deg is not None or args.aligned_tag or (args.seeds != 1 and not args.fault_campaign):
+            ap.error("--paper-cost, --tag-offset-deg and --aligned-tag go with --replay / --replay-all, --seeds also with "
                      "--fault-campaign")
     if not args.stuck_timeout > 0:
         ap.error("--stuck-timeout must be > 0")

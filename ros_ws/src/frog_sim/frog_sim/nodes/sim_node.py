@@ -15,6 +15,7 @@ faster than real time; otherwise stamps come from the node's ROS clock (system t
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import sys
@@ -49,6 +50,9 @@ _NODE_PARAMS = [
           "limbs through frog/limb_activation, as in the digital twin"),
     Param("odom_alias_topic", "", "also publish the ground truth here (e.g. frog/odom for a vision-free "
           "loop); empty = off"),
+    Param("odom_alias_yaw", 0.0, "the alias reports the frame of a tag turned by this yaw on the body [rad] "
+          "(heading + yaw, twist rotated into it), as a tracker would with the tag mounted turned and no offset "
+          "calibrated; the hardware replay uses the authors' robot's; 0 = the body frame", min=-math.pi, max=math.pi),
     Param("world_frame", "tank", "frame of poses (REP-105 world/odom frame)"),
     Param("body_frame", "frog", "robot body frame of the odometry's twist, x forward"),
     Param("publish_tf", True, "publish the true pose on tf as world_frame -> tf_frame (with the odometry)"),
@@ -236,6 +240,18 @@ class SimNode(Node):
             self.next_shape = t + self.shape_period
             self.publish_shape()
 
+    def _alias(self, msg: Odometry, heading: float, forward: float, lateral: float) -> Odometry:
+        """``msg`` as seen in a frame turned by ``odom_alias_yaw`` on the body (``msg`` itself at 0)."""
+        yaw = self.cfg["odom_alias_yaw"]
+        if yaw == 0.0:
+            return msg
+        alias = copy.deepcopy(msg)
+        q = alias.pose.pose.orientation
+        q.x, q.y, q.z, q.w = yaw_to_quaternion(heading + yaw)
+        c, s = math.cos(yaw), math.sin(yaw)
+        alias.twist.twist.linear.x, alias.twist.twist.linear.y = c * forward + s * lateral, -s * forward + c * lateral
+        return alias
+
     def publish_odom(self) -> None:
         s = self.sim.rigid_body_state()
         msg = Odometry()
@@ -251,7 +267,7 @@ class SimNode(Node):
         msg.twist.twist.angular.z = float(s.yaw_rate)
         self.odom_pub.publish(msg)
         if self.alias_pub is not None:
-            self.alias_pub.publish(msg)
+            self.alias_pub.publish(self._alias(msg, float(s.heading), forward, lateral))
         if self.tf_pub is not None:
             tf = TransformStamped()
             tf.header = msg.header

@@ -35,7 +35,7 @@ from visualization_msgs.msg import Marker
 from frog_vision.core.camera_model import CameraModel
 from frog_vision.core.pose import compose_offset
 from frog_vision.core.renderer import AUTHORS_CORNER_JITTER_PX, Occluder, RenderSettings, TankRenderer, integrate_twist
-from frog_vision.core.robot_shape import RobotShape, shape_from_segments
+from frog_vision.core.robot_shape import RobotShape, frog_outline, shape_from_segments
 from frog_vision.core.tank_calibration import Board
 from frog_vision.nodes.common import load_camera, load_camera_pose
 from frog_vision.nodes.messages import array_to_image, camera_info_msg, s_to_stamp, stamp_to_s, yaw_of
@@ -54,6 +54,9 @@ PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
           "ripples) [px]; the default gives the authors' measured pose noise, 0 = an ideal camera",
           min=0.0, max=5.0),
     Param("drop_probability", 0.0, "chance that a frame is lost (live)", min=0.0, max=0.99, live=True),
+    Param("tag_yaw", 0.0, "yaw of the tag on the body [rad], as mounted (the authors' robot's was turned by about "
+          "+5 deg: the hardware replay draws it so; a tracker without offset_yaw then reports heading + tag_yaw)",
+          min=-math.pi, max=math.pi),
     Param("seed", 0, "random seed (noise, drops, water texture)", min=0, max=2**31 - 1),
     Param("occlusion_start_s", -1.0, "hide the robot under an occluder from this node-clock time [s]; < 0 = never "
           "(live; on the system clock an epoch time)", min=-1.0, max=1e10, live=True),
@@ -92,7 +95,8 @@ class CameraSimNode(Node):
         self.create_subscription(Marker, "frog/sim/shape", self.on_shape, qos)
         self.odom = collections.deque(maxlen=200)          # (t, pose, twist)
         self.shape: RobotShape | None = None
-        self.tag_offset = None
+        c = frog_outline().ring_centre      # until the first shape arrives
+        self.tag_offset = (float(c[0]), float(c[1]), p["tag_yaw"])   # the tag's pose on the body
         self.frames = 0
         self.skipped = 0
         self.dropped = 0                 # frames lost on purpose (drop_probability)
@@ -167,7 +171,7 @@ class CameraSimNode(Node):
             return
         self.shape = _to_local(world, ref[1])
         c = self.shape.ring_centre
-        self.tag_offset = (float(c[0]), float(c[1]), 0.0)
+        self.tag_offset = (float(c[0]), float(c[1]), self.cfg["tag_yaw"])
 
     def tick(self) -> None:
         """Render every frame whose capture time (a grid of 1/fps in node-clock time) has come.
@@ -212,7 +216,7 @@ class CameraSimNode(Node):
         occ = []
         start = self.cfg["occlusion_start_s"]
         if start >= 0 and start <= t < start + self.cfg["occlusion_duration_s"]:
-            tag, _ = compose_offset(pose_now, self.tag_offset or (0.0, 0.0, 0.0))
+            tag, _ = compose_offset(pose_now, self.tag_offset)
             occ = [Occluder(tag[0], tag[1], 0.07)]
         w0 = time.perf_counter()
         c0 = time.process_time()
