@@ -9,6 +9,7 @@ fit         print the eq. 9 fit of every measured curvature profile (RMS errors)
 validate    simulated vs measured steady speed, 10 % EGaIn, phase 0.5 (RMS error)
 convergence time-step and edge-length convergence of the 10-cycle displacement
 fidelity    the simulator vs the real robot: transitions, kick response, coasting, speeds
+disturbance identify the twin's yaw disturbance and kick spread from the hardware runs
 """
 from __future__ import annotations
 
@@ -32,6 +33,7 @@ EXAMPLES = """examples:
   frog-sim convergence --out runs/convergence
   frog-sim fidelity --out runs/fidelity                 # table, PNGs, fidelity.json (incl. N-period replays)
   frog-sim fidelity --no-speeds --set body_drag_normal=1.2 --set limb_root_angle_deg=-60
+  frog-sim disturbance --out runs/disturbance        # the twin's yaw disturbance (about 10 min)
 """
 
 
@@ -119,6 +121,14 @@ def build_parser() -> argparse.ArgumentParser:
     fi.add_argument('--replay-periods', type=int, default=5, metavar='N',
                     help='replay the logged primitive sequences open loop for 1..N periods (0: skip; default 5)')
     fi.add_argument('--quiet', action='store_true', help='no progress bar')
+    di = sub.add_parser('disturbance', help="identify the twin's yaw disturbance (sd, tau) and per-firing kick "
+                        "spread from the hardware runs' residual heading per period", epilog=EXAMPLES,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    di.add_argument('--out', type=Path, default=None, help='output folder (default runs/frog_sim/disturbance_<time>)')
+    di.add_argument('--seeds', type=int, default=8, help='random draws per run and grid point (default 8)')
+    di.add_argument('--taus', type=str, default=None, help='time constants to try [s], comma-separated')
+    di.add_argument('--kicks', type=str, default=None, help='per-firing kick spreads to try, comma-separated')
+    di.add_argument('--quiet', action='store_true', help='no progress bar')
     return parser
 
 
@@ -371,6 +381,51 @@ def cmd_fidelity(args):
         print(f'wrote {f}')
 
 
+def _float_list(text, name, low, high):
+    try:
+        values = tuple(float(v) for v in text.split(','))
+    except ValueError:
+        raise CliError(f'{name} {text!r}: expected comma-separated numbers') from None
+    if not values or not all(np.isfinite(v) and low <= v <= high for v in values):
+        raise CliError(f'{name} {text!r}: every value must be in [{low:g}, {high:g}]')
+    return values
+
+
+def cmd_disturbance(args):
+    from . import disturbance_fit as df
+    from . import multi_period as mp
+    from .core import hardware_runs as hr
+    from .core.actuation import find_data_file
+    from .core.simulation import FrogSimulation
+    taus = _float_list(args.taus, '--taus', 0.05, 100.0) if args.taus else df.DEFAULT_TAUS
+    kicks = _float_list(args.kicks, '--kicks', 0.0, 0.5) if args.kicks else df.DEFAULT_KICK_SDS
+    if not 1 <= args.seeds <= 100:
+        raise CliError(f'--seeds {args.seeds} must be in 1-100')
+    folder = find_data_file('hardware_runs/line1.csv').parent
+    logs = hr.read_hardware_runs(folder)
+    offset, _, _ = hr.estimate_tag_offset([logs['line1'], logs['line2']])
+    windows = mp.real_windows(logs, offset, 1)
+    out = _out_dir(args, 'disturbance')
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+        bar = tqdm(total=(len([k for k in kicks if k > 0]) + len(taus) + 1) * 6 * args.seeds,
+                   desc='disturbance runs', unit='run')
+    t0, c0 = time.perf_counter(), time.process_time()
+    fit = df.identify(FrogSimulation(), windows, taus=taus, kick_sds=kicks, seeds=args.seeds,
+                      progress=(bar.update if bar is not None else None))
+    if bar is not None:
+        bar.close()
+    text = df.format_fit(fit)
+    print(text)
+    (out / 'disturbance.txt').write_text(text + '\n')
+    (out / 'disturbance.json').write_text(json.dumps(fit.to_dict(), indent=1) + '\n')
+    df.plot_fit(fit, out / 'disturbance.png')
+    print(f'{time.perf_counter() - t0:.0f} s wall, {time.process_time() - c0:.0f} s CPU')
+    for f in ('disturbance.txt', 'disturbance.json', 'disturbance.png'):
+        print(f'wrote {out / f}')
+
+
 def main(argv=None) -> int:
     """Entry point of ``frog-sim``; returns the exit status."""
     parser = build_parser()
@@ -379,7 +434,8 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     handlers = {'gait': cmd_gait, 'primitives': cmd_primitives, 'params': cmd_params, 'fit': cmd_fit,
-                'validate': cmd_validate, 'convergence': cmd_convergence, 'fidelity': cmd_fidelity}
+                'validate': cmd_validate, 'convergence': cmd_convergence, 'fidelity': cmd_fidelity,
+                'disturbance': cmd_disturbance}
     try:
         handlers[args.command](args)
     except CliError as exc:

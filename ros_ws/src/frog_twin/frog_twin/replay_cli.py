@@ -104,6 +104,8 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
               "settings": {"vision": not args.no_vision, "serial": not args.direct, "seeds": args.seed_list,
                            "real_time_factor": args.real_time_factor, "limb_strength_sd": args.limb_strength_sd,
                            "kick_strength_sd": args.kick_strength_sd, "tag_yaw_rad": tag_yaw,
+                           "yaw_disturbance_sd": args.yaw_disturbance_sd,
+                           "yaw_disturbance_tau_s": args.yaw_disturbance_tau,
                            "duration_s": duration, "library": str(args.library)},
               "units": {"distance": "m (rows: cm)", "time": "s from the first decision", "speed": "m/s"}}
     (folder / f"{setup.name}_replay.json").write_text(json.dumps(result, indent=1, default=float) + "\n")

@@ -21,6 +21,7 @@ from .integrator import ConvergenceError, ImplicitEulerIntegrator
 from .model_parameters import FrogParameters
 from .rigid_body import HeadingUnwrapper, RigidBodyState, nodal_velocities, rigid_body_state
 from .schedules import LIMB_NAMES, ActivationSchedule
+from .yaw_disturbance import YawDisturbance, torque_forces
 
 #: Default time step [s], chosen from the dt convergence study (``frog-sim convergence``
 #: plus finer steps; 10 cycles at 1 Hz, 10 % EGaIn), rerun for the issue-11 fluid model:
@@ -35,6 +36,8 @@ DEFAULT_TIME_STEP = 2.0e-3
 #: during a kick (~1e-3 N). Tightening it to 1e-8 N changes the 10-cycle displacement at
 #: 1 Hz by 1e-4 mm (3e-7 relative); it costs ~1.7 more Newton iterations per step.
 DEFAULT_FORCE_TOLERANCE = 1e-6
+#: The yaw disturbance is held over intervals of this length [s] (its time constant is seconds).
+DISTURBANCE_INTERVAL_S = 0.02
 
 __all__ = ['FrogSimulation', 'Trajectory', 'DEFAULT_TIME_STEP', 'ConvergenceError']
 
@@ -164,6 +167,8 @@ class FrogSimulation:
         integ.ei[:] = self.model.network.bend_stiffness
         integ.ea[:] = self.model.network.edge_stretching_stiffness
         integ.external_force[:] = 0.0
+        if getattr(self, '_disturbance', None) is not None:     # mid-run, as it were
+            self._disturbance.torque = self._disturbance.stationary_draw()
         self._schedule = ActivationSchedule.empty()
         self._gait = None
         self._horizon = -np.inf
@@ -237,6 +242,19 @@ class FrogSimulation:
         self._kick_rng = np.random.default_rng(seed)
         self._firing_factor = {}
         self._apply_limb_strength()
+
+    def set_yaw_disturbance(self, sd: float, tau: float, seed: int | None = None) -> None:
+        """A slowly varying yaw torque about the COM (:mod:`~frog_sim.core.yaw_disturbance`: an
+        Ornstein-Uhlenbeck process, stationary sd ``sd`` [N m], time constant ``tau`` [s]), held
+        over each :data:`DISTURBANCE_INTERVAL_S` of :meth:`step`. ``sd = 0`` turns it off."""
+        self._disturbance = YawDisturbance(sd, tau, seed) if sd > 0 else None
+        if self._disturbance is None:
+            self.integrator.external_force[:] = 0.0
+
+    @property
+    def yaw_disturbance(self) -> YawDisturbance | None:
+        """The yaw disturbance process (its ``torque`` [N m] now), or None when off."""
+        return getattr(self, '_disturbance', None)
 
     def _draw_kicks(self, limbs) -> None:
         if getattr(self, '_kick_sd', 0.0) <= 0.0:
@@ -428,7 +446,17 @@ class FrogSimulation:
         if n_steps < 0:
             raise ValueError(f'n_steps = {n_steps} must be >= 0')
         self._sync_schedule(until=self.time + n_steps * self.time_step)
-        self.integrator.advance(n_steps, self.time_step)
+        dist = getattr(self, '_disturbance', None)
+        if dist is None:
+            self.integrator.advance(n_steps, self.time_step)
+            return
+        chunk = max(1, int(round(DISTURBANCE_INTERVAL_S / self.time_step)))
+        integ = self.integrator
+        while n_steps > 0:
+            k = min(chunk, n_steps)
+            integ.external_force[:] = torque_forces(integ.x, integ.mass, dist.advance(k * self.time_step))
+            integ.advance(k, self.time_step)
+            n_steps -= k
 
     def run(self, duration: float, record_interval: float = 0.01, progress: bool = False,
             callback=None) -> Trajectory:

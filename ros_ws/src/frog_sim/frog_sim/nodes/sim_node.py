@@ -70,7 +70,11 @@ _NODE_PARAMS = [
     Param("kick_strength_sd", 0.0, "relative spread of each firing's kick: every fired limb kicks with its strength "
           "times a factor drawn from N(1, sd^2) per firing (real kicks vary from one to the next); 0 = none",
           min=0.0, max=0.5),
-    Param("seed", 0, "random seed of the limb strengths and the kick variability", min=0, max=2**31 - 1),
+    Param("yaw_disturbance_sd", 0.0, "stationary sd of a slowly varying yaw torque about the centre of mass "
+          "(an Ornstein-Uhlenbeck process: the tank's circulation and drifts, identified by 'frog-sim disturbance' "
+          "from the hardware runs) [N m]; 0 = none", min=0.0, max=1e-3),
+    Param("yaw_disturbance_tau_s", 2.0, "its time constant [s]", min=0.05, max=100.0),
+    Param("seed", 0, "random seed of the limb strengths, the kick variability and the yaw disturbance", min=0, max=2**31 - 1),
     Param("paused", False, "stop simulating and publishing (odometry, shape, /clock: a clock stall) while true; "
           "continues from the same simulated time afterwards (live)", live=True),
     Param("duration_s", 0.0, "stop simulating (keep publishing the last state) after this simulated time "
@@ -123,6 +127,8 @@ class SimNode(Node):
                 self.sim.set_limb_strength(dict(zip(LIMB_NAMES, factors.tolist())))
             if p["kick_strength_sd"] > 0:
                 self.sim.set_kick_variability(p["kick_strength_sd"], seed=p["seed"] + 1)
+            if p["yaw_disturbance_sd"] > 0:
+                self.sim.set_yaw_disturbance(p["yaw_disturbance_sd"], p["yaw_disturbance_tau_s"], seed=p["seed"] + 2)
             if p["gait_frequency_hz"] > 0:
                 self.sim.set_gait(p["gait_frequency_hz"], p["gait_phase_offset"],
                                   duration=p["gait_duration_s"] or None)

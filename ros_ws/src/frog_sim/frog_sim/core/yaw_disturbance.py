@@ -1,0 +1,61 @@
+"""A slowly varying yaw torque on the swimming frog: the tank's disturbances (issue 18).
+
+Replayed open loop from each decision's measured state, the simulator's heading change
+per period differs from the robot's by about 4 deg (sd), and the differences of
+consecutive periods are correlated (hardware runs: 0.63 at one period, 0.28 at two, about
+0 at three), which a kick that varies from one firing to the next (white per period) cannot
+give. What acts over seconds on a 5 cm body floating in a small tank: the circulation the
+robot's own strokes leave in the tank and reflect off its walls, surface films and
+draughts, the slow drift of the limbs' asymmetry as the SMA wires heat. Lumped, as
+marine-vehicle models treat currents and wave drift (Fossen 2011, sec. 10.3: a first-order
+Gauss-Markov process), as a yaw torque ``N(t)`` about the COM that is an Ornstein-Uhlenbeck
+process with time constant ``tau`` and stationary sd ``sd``::
+
+    dN = -N / tau dt + sd sqrt(2 / tau) dW
+
+advanced exactly over each interval ``h``: ``N <- a N + sd sqrt(1 - a^2) xi``, ``a = exp(-h /
+tau)``. The torque is spread over the nodes by mass, ``f_i = m_i N perp(r_i) / I`` (``r_i``
+from the COM, ``I = sum m_i |r_i|^2``): a pure torque, zero net force. It is off in the
+model (the library, the sweeps and the fidelity replays are deterministic); the digital
+twin draws it (``sim_node`` ``yaw_disturbance_sd``, ``yaw_disturbance_tau_s``), with values
+identified by ``frog-sim disturbance`` from the hardware runs' residuals.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class YawDisturbance:
+    """The Ornstein-Uhlenbeck yaw torque: ``sd`` [N m], ``tau`` [s], its own random stream."""
+
+    def __init__(self, sd: float, tau: float, seed: int | None = None):
+        if not (math.isfinite(sd) and sd >= 0.0):
+            raise ValueError(f'yaw disturbance sd = {sd!r} N m must be finite and >= 0')
+        if not (math.isfinite(tau) and tau > 0.0):
+            raise ValueError(f'yaw disturbance time constant = {tau!r} s must be finite and > 0')
+        self.sd = float(sd)
+        self.tau = float(tau)
+        self.rng = np.random.default_rng(seed)
+        self.torque = self.stationary_draw()
+
+    def stationary_draw(self) -> float:
+        """A torque from the stationary distribution N(0, sd^2) (e.g. at a reset mid-run)."""
+        return float(self.sd * self.rng.standard_normal())
+
+    def advance(self, h: float) -> float:
+        """The torque after ``h`` more seconds (exact OU transition); returns it [N m]."""
+        a = math.exp(-h / self.tau)
+        self.torque = float(a * self.torque + self.sd * math.sqrt(max(0.0, 1.0 - a * a)) * self.rng.standard_normal())
+        return self.torque
+
+
+def torque_forces(x: np.ndarray, mass: np.ndarray, torque: float) -> np.ndarray:
+    """Nodal forces (2N,) [N] of a pure torque [N m] about the COM, spread by mass."""
+    p = np.asarray(x, dtype=float).reshape(-1, 2)
+    m = np.asarray(mass, dtype=float)
+    r = p - (m[:, None] * p).sum(axis=0) / m.sum()
+    inertia = float((m * (r ** 2).sum(axis=1)).sum())
+    f = (m * torque / inertia)[:, None] * np.column_stack([-r[:, 1], r[:, 0]])
+    return f.ravel()
