@@ -66,5 +66,15 @@ def test_short_replay_writes_the_comparison(sin1_run, library, tmp_path):
     assert math.hypot(first[1] - x0, first[2] - y0) < 1e-3
     assert abs((first[3] - h0 + math.pi) % (2 * math.pi) - math.pi) < 1e-3
     assert rec.path[0] == pytest.approx(setup.path[0], abs=1e-9) and len(rec.path) == len(setup.path)
+    # the planner saw the heading of the tag as the robot's was mounted (turned by -tag offset), the
+    # position and the world as they are
+    tag_yaw = res["settings"]["tag_yaw_rad"]
+    assert tag_yaw == pytest.approx(-setup.tag_offset) and abs(tag_yaw) > math.radians(2)
+    truth = {round(t, 4): (x, y, h) for t, x, y, h in rec.truth}
+    pairs = [(truth[round(t, 4)], (x, y, h)) for t, x, y, h in rec.tracked if round(t, 4) in truth]
+    assert len(pairs) > 100
+    for (x, y, h), (xs, ys, hs) in pairs:
+        assert (xs, ys) == (x, y)
+        assert math.remainder(hs - h - tag_yaw, 2 * math.pi) == pytest.approx(0.0, abs=1e-6)
     # it moved and decided: a few periods in 6 simulated seconds
     assert twin["decisions"] >= 3 and twin["mean_distance_m"] < 0.1

@@ -144,6 +144,19 @@ def test_odom_alias_as_a_turned_tag_reports_it(launch, probe):
     assert sim.stop() == 0
 
 
+def test_yaw_disturbance_turns_a_swimming_frog(launch, probe):
+    """yaw_disturbance_sd: the tank's slowly varying torque turns a frog swimming the symmetric gait (which
+    alone keeps its heading to round-off); before the first firing the frog stays put."""
+    sim = launch("sim_node", params={"yaw_disturbance_sd": 2e-4, "yaw_disturbance_tau_s": 5.0, "seed": 1,
+                                     "initial_heading": 0.5, "gait_frequency_hz": 1.0, "publish_clock": True})
+    odom = []
+    probe.node.create_subscription(Odometry, "/frog/sim/odom", odom.append, QOS)
+    probe.spin_until(lambda: odom and _stamp(odom[-1]) > 4.0, 120, "4 s of simulated odometry")
+    turned = [abs(math.remainder(_yaw(m.pose.pose.orientation) - 0.5, 2 * math.pi)) for m in odom]
+    assert max(turned) > math.radians(1.0), max(turned)
+    assert sim.stop() == 0
+
+
 def test_paused_stalls_the_simulation_and_clock_then_continues(launch, probe):
     """paused (the fault injector's clock stall): no /clock, odometry or simulation while true; afterwards the
     time continues from where it stopped (no jump to catch up)."""

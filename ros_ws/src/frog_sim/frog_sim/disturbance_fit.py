@@ -27,7 +27,6 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from . import multi_period as mp
-from .core.schedules import ActivationSchedule
 
 #: Reference torque of the grid runs [N m] (rescaled by the fit).
 REFERENCE_SD = 2.0e-5

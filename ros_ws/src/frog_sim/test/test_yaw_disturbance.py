@@ -59,11 +59,29 @@ def test_a_held_torque_spins_the_body_up_as_newton_says():
     sim = FrogSimulation()
     sim.set_yaw_disturbance(1e-4, tau=1e9, seed=0)      # tau >> the test: the torque holds
     torque = sim.yaw_disturbance.torque
+    sim.fire_limbs(["FL"], start=10.0)                  # swimming (the torque acts), the kick far later
     t = 0.04
     sim.step(int(round(t / sim.time_step)))
     # from rest the drag is second order in the tiny speeds: L = N t within a few %
     assert _angular_momentum(sim) == pytest.approx(torque * t, rel=0.05)
     assert abs(sim.rigid_body_state().yaw_rate) > 0
+
+
+def test_calm_until_the_first_firing_also_after_a_reset():
+    sim = FrogSimulation()
+    sim.set_yaw_disturbance(1e-4, tau=1e9, seed=0)
+    x0 = sim.node_positions.copy()
+    sim.step(50)
+    assert np.array_equal(sim.node_positions, x0)       # nothing fired: the frog stays put
+    sim.execute_primitive("I")                          # no limb: still calm
+    sim.step(10)
+    assert np.array_equal(sim.node_positions, x0)
+    sim.fire_limbs(["FL"], start=10.0)
+    sim.step(20)
+    assert abs(_angular_momentum(sim)) > 0
+    sim.reset()
+    sim.step(20)
+    assert _angular_momentum(sim) == 0.0
 
 
 def test_off_by_default_and_switchable():

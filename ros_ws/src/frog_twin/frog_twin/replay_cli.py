@@ -68,7 +68,8 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
     x0, y0, h0 = setup.start_pose
     print(f"replay {progress}{setup.name}: period {setup.period:.4f} s, start ({x0:.3f}, {y0:.3f}) m "
           f"{math.degrees(h0):.1f} deg, tag offset {math.degrees(setup.tag_offset):+.1f} deg "
-          f"({setup.tag_offset_source}), twin's tag {'aligned' if args.aligned_tag else 'turned as mounted'}; planner {'paper' if args.paper_cost else 'project'}; "
+          f"({setup.tag_offset_source}), twin's tag {'aligned' if args.aligned_tag else 'turned as mounted'}; "
+          f"planner {'paper' if args.paper_cost else 'project'}; "
           f"at most {duration:.0f} s simulated", flush=True)
     twins, tracks = [], []
     # the robot's planner saw the tag's heading, body heading - offset: the twin's tag is mounted

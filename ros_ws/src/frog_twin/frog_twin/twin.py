@@ -682,9 +682,10 @@ def main(argv=None) -> int:
         args.path = args.path or "all"
         if args.path not in (*PATH_NAMES, "all"):
             ap.error(f"--path {args.path!r}: expected one of {', '.join(PATH_NAMES)}, all (or --replay RUN.csv)")
-        if args.paper_cost or args.tag_offset_deg is not None or args.aligned_tag or (args.seeds != 1 and not args.fault_campaign):
-            ap.error("--paper-cost, --tag-offset-deg and --aligned-tag go with --replay / --replay-all, --seeds also with "
-                     "--fault-campaign")
+        if (args.paper_cost or args.tag_offset_deg is not None or args.aligned_tag
+                or (args.seeds != 1 and not args.fault_campaign)):
+            ap.error("--paper-cost, --tag-offset-deg and --aligned-tag go with --replay / --replay-all, --seeds "
+                     "also with --fault-campaign")
     if not args.stuck_timeout > 0:
         ap.error("--stuck-timeout must be > 0")
     try:

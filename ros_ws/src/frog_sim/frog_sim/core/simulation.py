@@ -169,6 +169,7 @@ class FrogSimulation:
         integ.external_force[:] = 0.0
         if getattr(self, '_disturbance', None) is not None:     # mid-run, as it were
             self._disturbance.torque = self._disturbance.stationary_draw()
+            self._disturbance_on = False
         self._schedule = ActivationSchedule.empty()
         self._gait = None
         self._horizon = -np.inf
@@ -246,17 +247,26 @@ class FrogSimulation:
     def set_yaw_disturbance(self, sd: float, tau: float, seed: int | None = None) -> None:
         """A slowly varying yaw torque about the COM (:mod:`~frog_sim.core.yaw_disturbance`: an
         Ornstein-Uhlenbeck process, stationary sd ``sd`` [N m], time constant ``tau`` [s]), held
-        over each :data:`DISTURBANCE_INTERVAL_S` of :meth:`step`. ``sd = 0`` turns it off."""
+        over each :data:`DISTURBANCE_INTERVAL_S` of :meth:`step`. ``sd = 0`` turns it off.
+
+        The tank is calm until the frog swims: the torque acts from the first limb firing after
+        this call or :meth:`reset` on (the circulation is the robot's own wake; a frog waiting
+        for its first command stays where it was put)."""
         self._disturbance = YawDisturbance(sd, tau, seed) if sd > 0 else None
-        if self._disturbance is None:
-            self.integrator.external_force[:] = 0.0
+        self._disturbance_on = False
+        self.integrator.external_force[:] = 0.0
 
     @property
     def yaw_disturbance(self) -> YawDisturbance | None:
         """The yaw disturbance process (its ``torque`` [N m] now), or None when off."""
         return getattr(self, '_disturbance', None)
 
+    def _swimming(self) -> None:
+        self._disturbance_on = True
+
     def _draw_kicks(self, limbs) -> None:
+        if len(limbs):
+            self._swimming()
         if getattr(self, '_kick_sd', 0.0) <= 0.0:
             return
         for limb in limbs:
@@ -298,6 +308,7 @@ class FrogSimulation:
         start = self.time if start is None else float(start)
         self._gait = (float(frequency_hz), float(phase_offset), start,
                       np.inf if duration is None else float(duration))
+        self._swimming()
         self._sync_schedule(force=True)
 
     def set_schedule(self, schedule: ActivationSchedule, profile_frequency_hz: float | None = None) -> None:
@@ -313,6 +324,8 @@ class FrogSimulation:
             self.use_profile(profile_frequency_hz)
         self._gait = None
         self._schedule = schedule
+        if any(len(schedule.times(l)) for l in LIMB_NAMES):
+            self._swimming()
         self._sync_schedule(force=True)
 
     def execute_primitive(self, primitive, start: float | None = None) -> None:
@@ -447,7 +460,7 @@ class FrogSimulation:
             raise ValueError(f'n_steps = {n_steps} must be >= 0')
         self._sync_schedule(until=self.time + n_steps * self.time_step)
         dist = getattr(self, '_disturbance', None)
-        if dist is None:
+        if dist is None or not self._disturbance_on:
             self.integrator.advance(n_steps, self.time_step)
             return
         chunk = max(1, int(round(DISTURBANCE_INTERVAL_S / self.time_step)))

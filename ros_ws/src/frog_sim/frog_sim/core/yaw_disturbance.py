@@ -14,7 +14,8 @@ process with time constant ``tau`` and stationary sd ``sd``::
     dN = -N / tau dt + sd sqrt(2 / tau) dW
 
 advanced exactly over each interval ``h``: ``N <- a N + sd sqrt(1 - a^2) xi``, ``a = exp(-h /
-tau)``. The torque is spread over the nodes by mass, ``f_i = m_i N perp(r_i) / I`` (``r_i``
+tau)``; it acts from the frog's first firing on (a frog waiting for its first command
+stays put). The torque is spread over the nodes by mass, ``f_i = m_i N perp(r_i) / I`` (``r_i``
 from the COM, ``I = sum m_i |r_i|^2``): a pure torque, zero net force. It is off in the
 model (the library, the sweeps and the fidelity replays are deterministic); the digital
 twin draws it (``sim_node`` ``yaw_disturbance_sd``, ``yaw_disturbance_tau_s``), with values

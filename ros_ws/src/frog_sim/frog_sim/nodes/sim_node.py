@@ -74,7 +74,8 @@ _NODE_PARAMS = [
           "(an Ornstein-Uhlenbeck process: the tank's circulation and drifts, identified by 'frog-sim disturbance' "
           "from the hardware runs) [N m]; 0 = none", min=0.0, max=1e-3),
     Param("yaw_disturbance_tau_s", 2.0, "its time constant [s]", min=0.05, max=100.0),
-    Param("seed", 0, "random seed of the limb strengths, the kick variability and the yaw disturbance", min=0, max=2**31 - 1),
+    Param("seed", 0, "random seed of the limb strengths, the kick variability and the yaw disturbance", min=0,
+          max=2**31 - 1),
     Param("paused", False, "stop simulating and publishing (odometry, shape, /clock: a clock stall) while true; "
           "continues from the same simulated time afterwards (live)", live=True),
     Param("duration_s", 0.0, "stop simulating (keep publishing the last state) after this simulated time "
