@@ -103,6 +103,37 @@ def simulated_residuals(sim, sequences: dict, sd: float, tau: float, seeds: int,
     return out
 
 
+def implied_rms(c, n: int) -> float:
+    """RMS heading error after ``n`` periods that residuals with autocovariance ``c`` alone give:
+    ``sqrt(sum_{i, j < n} C(|i - j|))`` (the error of a sum of ``n`` consecutive residuals)."""
+    return float(math.sqrt(sum(c[abs(i - j)] for i in range(n) for j in range(n))))
+
+
+def held_out_predictability(windows, resid: dict) -> float:
+    """How much of the residual a model of the state could remove: the leave-one-run-out R^2 of a
+    linear regression of the residual on the primitive, the previous primitive (one-hot) and the
+    measured body velocity (forward, lateral, yaw rate) at the decision (1 - SSE / sum e^2)."""
+    rows, y, runs = [], [], []
+    for run in sorted(resid):
+        ws = sorted((w for w in windows if w.run == run), key=lambda w: w.index)
+        prev = ''
+        for w, e in zip(ws, resid[run]):
+            p = w.primitives[0]
+            rows.append([float(p == c) for c in 'ABCDEFGH'] + [float(prev == c) for c in 'ABCDEFGH']
+                        + [w.forward, w.lateral, w.yaw_rate])
+            y.append(e)
+            runs.append(run)
+            prev = p
+    x, y, runs = np.array(rows), np.array(y), np.array(runs)
+    x = x[:, x.std(axis=0) > 0]
+    pred = np.zeros_like(y)
+    for run in set(runs.tolist()):
+        m = runs == run
+        coef, *_ = np.linalg.lstsq(x[~m], y[~m], rcond=None)
+        pred[m] = x[m] @ coef
+    return float(1.0 - np.sum((y - pred) ** 2) / np.sum(y ** 2))
+
+
 @dataclass
 class DisturbanceFit:
     """The identified disturbance and every number behind it (angles in rad, C in rad^2)."""
@@ -115,6 +146,7 @@ class DisturbanceFit:
     fitted_c: list
     b_wander_real: float
     b_wander_fitted: float
+    held_out_r2: float
     grid: list = field(default_factory=list)     # per (kick_sd, tau): sd, C(0..MAX_LAG) predicted, score
     seeds: int = 0
     latency: float = 0.1
@@ -167,7 +199,8 @@ def identify(sim, windows, taus=DEFAULT_TAUS, kick_sds=DEFAULT_KICK_SDS, seeds: 
     sim.set_yaw_disturbance(0.0, 1.0)
     sim.set_kick_variability(0.0)
     return DisturbanceFit(sd=sd, tau=tau, kick_sd=kick, real_c=real_c.tolist(), real_n=real_n.tolist(),
-                          fitted_c=c.tolist(), b_wander_real=b_real, b_wander_fitted=b_sim, grid=grid,
+                          fitted_c=c.tolist(), b_wander_real=b_real, b_wander_fitted=b_sim,
+                          held_out_r2=held_out_predictability(windows, resid), grid=grid,
                           seeds=seeds, latency=latency)
 
 
@@ -186,6 +219,10 @@ def format_fit(fit: DisturbanceFit) -> str:
                  f'{math.degrees(fit.b_wander_real):.1f} deg, fitted {math.degrees(fit.b_wander_fitted):.1f} deg '
                  f'(the robot\'s includes its left turn under B, +1.6 deg per period: a limb asymmetry, '
                  f'the twin\'s limb_strength_sd)')
+    lines.append('RMS heading error after N periods that the residual alone gives (deg): '
+                 + ', '.join(f'N = {n}: {math.degrees(implied_rms(fit.real_c, n)):.1f}' for n in range(1, 5)))
+    lines.append(f'held-out R^2 of the residual on (primitive, previous primitive, velocity), leave one run out: '
+                 f'{fit.held_out_r2:.2f} (what a better deterministic model of the state could remove)')
     lines.append(f'identified: yaw_disturbance_sd = {fit.sd:.3e} N m, yaw_disturbance_tau_s = {fit.tau:g} s, '
                  f'kick_strength_sd = {fit.kick_sd:g} ({fit.seeds} seeds per run)')
     return '\n'.join(lines)

@@ -100,3 +100,30 @@ def test_autocovariance_by_hand():
     c, n = autocovariance([[1.0, 2.0, 3.0], [2.0, -1.0]], max_lag=2)
     assert n.tolist() == [5, 3, 1]
     assert c == pytest.approx([(1 + 4 + 9 + 4 + 1) / 5, (2 + 6 - 2) / 3, 3 / 1])
+
+
+def test_implied_rms_by_hand():
+    from frog_sim.disturbance_fit import implied_rms
+    c = [4.0, 1.0, 0.5]
+    assert implied_rms(c, 1) == pytest.approx(2.0)
+    assert implied_rms(c, 2) == pytest.approx(math.sqrt(2 * 4.0 + 2 * 1.0))
+    assert implied_rms(c, 3) == pytest.approx(math.sqrt(3 * 4.0 + 4 * 1.0 + 2 * 0.5))
+    # white residuals: the error grows as sqrt(N)
+    assert implied_rms([1.0, 0.0, 0.0, 0.0], 4) == pytest.approx(2.0)
+
+
+def test_held_out_predictability_sees_a_state_effect_and_not_noise():
+    from frog_sim.disturbance_fit import held_out_predictability
+    from frog_sim.multi_period import ReplayWindow
+    rng = np.random.default_rng(0)
+    windows, by_state, noise = [], {}, {}
+    for run in ("r1", "r2", "r3", "r4"):
+        for k in range(30):
+            w = ReplayWindow(run=run, index=k, time=k * 1.4, period=1.4, primitives=[rng.choice(list("BCEF"))],
+                             forward=float(rng.uniform(0, 0.03)), lateral=float(rng.normal(0, 0.005)),
+                             yaw_rate=float(rng.normal(0, 0.2)), real=[[0, 0, 0]])
+            windows.append(w)
+            by_state.setdefault(run, []).append(0.5 * w.yaw_rate + 2.0 * w.forward)
+            noise.setdefault(run, []).append(float(rng.normal(0, 0.05)))
+    assert held_out_predictability(windows, by_state) > 0.99
+    assert held_out_predictability(windows, noise) < 0.1
