@@ -78,3 +78,13 @@ def test_short_replay_writes_the_comparison(sin1_run, library, tmp_path):
         assert math.remainder(hs - h - tag_yaw, 2 * math.pi) == pytest.approx(0.0, abs=1e-6)
     # it moved and decided: a few periods in 6 simulated seconds
     assert twin["decisions"] >= 3 and twin["mean_distance_m"] < 0.1
+    # the same replay again into the same folder: the recorder keeps the first file and starts the next;
+    # the new report reads only its own (it had read both: every decision twice, two trajectories)
+    r = subprocess.run(["frog-twin", "--replay", str(runs / "sin1.csv"), "--path", str(path_file), "--no-vision",
+                        "--direct", "--duration", "6", "--library", str(library), "--out", str(out)],
+                       capture_output=True, text=True, timeout=240)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert "1 earlier recording(s)" in r.stdout, r.stdout[-2000:]
+    (again,) = json.loads((folder / "sin1_replay.json").read_text())["twins"]
+    assert [Path(f).name for f in again["recording"]] == ["sin1_001.mcap"]
+    assert abs(again["decisions"] - twin["decisions"]) <= 1, (again["decisions"], twin["decisions"])

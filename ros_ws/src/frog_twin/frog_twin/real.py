@@ -293,8 +293,10 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
     from soft_robot_common.processes import acquire_domain
     from soft_robot_common.supervision import RestartPolicy, Supervisor
 
+    from frog_twin.core.twin_recording import recordings
     from frog_twin.twin import _restarter
     out.mkdir(parents=True, exist_ok=True)
+    earlier = recordings(out / "recording")
     graph = real_graph(args, name, out, path_settings, settings)
     path = path_settings.build()
     if args.domain is not None:
@@ -373,16 +375,17 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
         watch.close()
         domain.release()
     metrics = real_report(args, name, out, settings, path_settings, reason, t_stop - t_start, checks,
-                          supervisor.summary())
+                          supervisor.summary(), earlier)
     return metrics
 
 
-def real_report(args, name, out, settings, path_settings, reason, wall, checks, supervision=None) -> dict:
+def real_report(args, name, out, settings, path_settings, reason, wall, checks, supervision=None,
+                earlier=frozenset()) -> dict:
     """The twin's report of a real run, on the tracked pose (the only trajectory there is)."""
     from frog_planner.core.settings import as_dict
 
-    from frog_twin.core.twin_recording import readable_files
-    files = sorted((out / "recording").glob("*.mcap"))
+    from frog_twin.core.twin_recording import readable_files, run_files
+    files = run_files(out / "recording", earlier)     # not an earlier run's files in the same folder
     if not files:
         raise RuntimeError(f"no recording in {out / 'recording'}; see {out}/recorder.log")
     files = readable_files(files, out / "recovered")    # a killed recorder's file, recovered

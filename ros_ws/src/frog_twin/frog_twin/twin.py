@@ -61,7 +61,8 @@ from soft_robot_common.supervision import RestartPolicy, Supervisor
 
 from frog_twin.core import twin_report
 from frog_twin.core.faults import FaultSpecError, check_against_graph, fault_report, parse_faults
-from frog_twin.core.twin_recording import read_twin_recording, readable_files, recorded_stamps
+from frog_twin.core.twin_recording import (read_twin_recording, readable_files, recorded_stamps, recordings,
+                                            run_files)
 from frog_twin.fault_injection import CHECKED_TOPICS, FaultInjector, RunObserver
 
 PATH_NAMES = ("line", "sine", "ellipse")
@@ -329,6 +330,10 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
     restarted with back-off (the world, sim_node, and the robot are not: the run stops).
     """
     out.mkdir(parents=True, exist_ok=True)
+    earlier = recordings(out / "recording")
+    if earlier:
+        print(f"  {name}: {len(earlier)} earlier recording(s) in {out / 'recording'} are left as they are and "
+              f"not read", flush=True)
     path_settings = path_settings or placed_path_settings(args.path_settings, name)
     settings = settings or args.settings
     x0, y0, h0 = start_pose or _path_start_pose(args, path_settings)
@@ -407,7 +412,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
         supervisor.stop_all()
         watch.close()
         domain.release()
-    files = sorted((out / "recording").glob("*.mcap"))
+    files = run_files(out / "recording", earlier)     # not an earlier run's files in the same folder
     if not files:
         raise RuntimeError(f"no recording in {out / 'recording'}; see {out}/recorder.log")
     files = readable_files(files, out / "recovered")    # a killed recorder's file, recovered

@@ -92,6 +92,17 @@ def read_twin_recording(mcap_files, with_images: bool = True) -> TwinRecording:
     return rec
 
 
+def recordings(folder) -> set:
+    """The MCAP files in ``folder`` now (what a run's recorder must not be read with)."""
+    return set(Path(folder).glob("*.mcap"))
+
+
+def run_files(folder, before) -> list:
+    """This run's MCAP files in ``folder``, in order: those not in ``before`` (:func:`recordings`
+    taken at the run's start; a recorder never overwrites, so an earlier run's files stay)."""
+    return sorted(f for f in Path(folder).glob("*.mcap") if f not in before)
+
+
 def readable_files(mcap_files, recovered_dir) -> list:
     """The files, with each one cut short by a killed recorder replaced by its recovered copy.
 
