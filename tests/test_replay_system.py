@@ -88,3 +88,13 @@ def test_short_replay_writes_the_comparison(sin1_run, library, tmp_path):
     (again,) = json.loads((folder / "sin1_replay.json").read_text())["twins"]
     assert [Path(f).name for f in again["recording"]] == ["sin1_001.mcap"]
     assert abs(again["decisions"] - twin["decisions"]) <= 1, (again["decisions"], twin["decisions"])
+
+
+@pytest.mark.parametrize("args, named", [
+    (["--path", "line", "--aligned-tag"], "--aligned-tag"),
+    (["--path", "line", "--yaw-disturbance-sd", "-1"], "--yaw-disturbance-sd"),
+    (["--path", "line", "--yaw-disturbance-tau", "0"], "--yaw-disturbance-tau"),
+])
+def test_bad_replay_and_twin_variability_options_exit_2(args, named):
+    r = subprocess.run(["frog-twin", *args], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and named in r.stderr, r.stderr[-2000:]

@@ -37,3 +37,10 @@ def test_bad_input_exits_nonzero_with_the_value_named(tmp_path, capsys):
     assert 'EGaIn 60' in capsys.readouterr().err      # unmeasured designs inside the hull are interpolated
     assert main(['gait', '--phase', '1.5', '--quiet']) == 2
     assert main([]) == 2
+    # frog-sim disturbance: its grids and draws are checked before any data is read
+    assert main(['disturbance', '--taus', '1,x', '--quiet']) == 2
+    assert "--taus '1,x'" in capsys.readouterr().err
+    assert main(['disturbance', '--kicks', '0.7', '--quiet']) == 2
+    assert '[0, 0.5]' in capsys.readouterr().err
+    assert main(['disturbance', '--seeds', '0', '--quiet']) == 2
+    assert '--seeds 0' in capsys.readouterr().err
