@@ -15,6 +15,12 @@ from soft_robot_common.processes import (DOMAIN_RANGE, LOCK_DIR, NodeProcess, Ro
                                          acquire_domain, ros_args)
 
 
+# Cheap requests with no side effect beyond an idempotent set: safe to re-send. (Kinematics
+# queries are not re-sent: a solve can take seconds on a loaded machine, and IK warm-starts.)
+IDEMPOTENT_SERVICES = {"ListParameters", "DescribeParameters", "GetParameters", "GetParameterTypes",
+                       "SetParameters"}
+
+
 class GraphProbe:
     """An rclpy node inside the test process, on the test's domain, to observe the graph."""
 
@@ -94,10 +100,29 @@ class GraphProbe:
         return self.spin_until(client.service_is_ready, timeout,
                                f"service {client.srv_name}")
 
-    def call(self, client, request, timeout: float = 15.0):
-        future = client.call_async(request)
-        self.spin_until(future.done, timeout, f"response of {client.srv_name}")
-        return future.result()
+    def call(self, client, request, timeout: float = 15.0, resend_s: float = 2.0):
+        """Call and wait for the response; a query that may be re-asked is re-sent every ``resend_s``.
+
+        Fast DDS drops a response when the server has not yet matched the client's response
+        reader ("failed to send response (timeout)"), although ``service_is_ready`` was true on
+        the client's side: discovery is asymmetric and slow on a loaded machine. A side-effect-free
+        request (the parameter services) is then asked again; any other is
+        sent once, so an action is never done twice.
+        """
+        idempotent = client.srv_type.__name__ in IDEMPOTENT_SERVICES
+        futures = [client.call_async(request)]
+        end = time.monotonic() + timeout
+        while True:
+            step = min(resend_s, end - time.monotonic()) if idempotent else end - time.monotonic()
+            try:
+                self.spin_until(lambda: any(f.done() for f in futures), max(step, 0.0),
+                                f"response of {client.srv_name}")
+                break
+            except TimeoutError:
+                if time.monotonic() >= end:
+                    raise
+                futures.append(client.call_async(request))
+        return next(f for f in futures if f.done()).result()
 
     def close(self) -> None:
         self.executor.shutdown()

@@ -47,7 +47,9 @@ def test_recoverable_faults_complete_the_path_with_nothing_fired_on_stale_state(
     for f in faults:       # every fault was applied while the frog was on the path, none refused
         assert any(w.startswith(f.label() + ":") for w in done), (f.label(), done)
     assert not rep["injector_failures"], rep["injector_failures"]
-    assert rep["outcome"] == "completed", (rep["stop_reason"], stdout[-3000:])
+    why = {"goal": m["goal_reached"], "progress": m["final_progress"], "stop_reason": rep["stop_reason"],
+           "stale": rep["stale_firings"][:3], "recorder": rep["recorder"], "unclean": m["unclean_stops"]}
+    assert rep["outcome"] == "completed", (why, stdout[-3000:])
     assert rep["stale_firings"] == [], rep["stale_firings"][:5]
     assert rep["n_firings"] >= 10
     assert rep["recorder_lost"] == 0, rep["recorder"]
