@@ -230,9 +230,10 @@ class PlannerNode(Node):
         self.running = False
 
     # -- decisions -----------------------------------------------------------------------------
-    def _state(self):
-        """(state, reason) when no decision can be made now, else None."""
+    def _state(self, now=None):
+        """(state, reason) when no decision can be made at ``now`` (default: the clock's now), else None."""
         S = self._Status
+        now = self.get_clock().now() if now is None else now
         if self.library_error:
             return S.STATE_ERROR, self.library_error
         if not self.running:
@@ -242,10 +243,10 @@ class PlannerNode(Node):
         if self.odom is None:
             return S.STATE_WAITING, f"no odometry on {self.resolve_topic_name(self.cfg['odom_topic'])} yet"
         bound = self.cfg["stale_periods"] * self.settings.period
-        age = (self.get_clock().now() - self.odom_received).nanoseconds * 1e-9
+        age = (now - self.odom_received).nanoseconds * 1e-9
         if age > bound:
             return S.STATE_WAITING, f"odometry is stale ({age:.2f} s old)"
-        stamp_age = self.pose_age()
+        stamp_age = self.pose_age(now)
         if stamp_age > bound:
             return S.STATE_WAITING, (f"odometry is stale: its stamp is {stamp_age:.2f} s old (received "
                                      f"{age:.2f} s ago; bound {bound:.2f} s)")
@@ -254,11 +255,12 @@ class PlannerNode(Node):
                                      f"and the planner use the same clock? use_sim_time)")
         return None
 
-    def pose_age(self) -> float:
+    def pose_age(self, now=None) -> float:
         """Age of the newest pose by its header stamp, now - stamp [s]; NaN before the first."""
         if self.odom_stamp is None:
             return math.nan
-        return (self.get_clock().now() - self.odom_stamp).nanoseconds * 1e-9
+        now = self.get_clock().now() if now is None else now
+        return (now - self.odom_stamp).nanoseconds * 1e-9
 
     def _diagnostics(self):
         """(level, message, values): ERROR without a usable library, WARN while waiting."""
@@ -273,8 +275,9 @@ class PlannerNode(Node):
                   "stale_decisions": self.stale_decisions, "pose_age_s": self.pose_age()}
         return level, message, values
 
-    def _publish(self, primitive_id: int, name: str, state: int, message: str, decision=None) -> None:
-        stamp = self.get_clock().now().to_msg()
+    def _publish(self, primitive_id: int, name: str, state: int, message: str, decision=None, now=None) -> None:
+        now = self.get_clock().now() if now is None else now
+        stamp = now.to_msg()
         msg = self._Primitive(id=primitive_id, name=name)
         msg.header.stamp = stamp
         msg.header.frame_id = self.cfg["world_frame"]
@@ -283,7 +286,7 @@ class PlannerNode(Node):
         status = self._Status(primitive_id=primitive_id, primitive_name=name, state=state, message=message,
                               total_cost=nan, cost_distance=nan, cost_heading=nan, cost_progress=nan,
                               distance_to_path=nan, predicted_pose=Pose2D(x=nan, y=nan, theta=nan),
-                              pose_age=self.pose_age())
+                              pose_age=self.pose_age(now))
         status.header.stamp, status.header.frame_id = stamp, self.cfg["world_frame"]
         if decision is not None:
             w = self.settings.weights
@@ -328,17 +331,22 @@ class PlannerNode(Node):
             except ValueError as exc:
                 blocked = S.STATE_ERROR, f"planner rejected the state: {exc}"
             else:
-                if d.goal_reached:
-                    self.goal_reached = True
-                    message = (f"goal reached (progress {d.progress:.3f}, {d.distance_to_path * 100:.2f} cm "
-                               f"from the path)")
-                    self._log_state(S.STATE_GOAL_REACHED, message)
-                    self._publish(8, "I", S.STATE_GOAL_REACHED, message)
-                    return
-                self._log_state(S.STATE_FOLLOWING, f"following the {self.path.name} path")
-                self.get_logger().debug(f"primitive {d.name}: cost {d.total_cost:.2f}, progress {d.progress:.3f}")
-                self._publish(d.primitive_id, d.name, S.STATE_FOLLOWING, "following", d)
+                # checked again when the decision is ready, which is also its stamp: on a loaded
+                # machine deciding takes long enough for a pose at the bound to pass it meanwhile
+                now = self.get_clock().now()
+                blocked = self._state(now)
+        if blocked is None:
+            if d.goal_reached:
+                self.goal_reached = True
+                message = (f"goal reached (progress {d.progress:.3f}, {d.distance_to_path * 100:.2f} cm "
+                           f"from the path)")
+                self._log_state(S.STATE_GOAL_REACHED, message)
+                self._publish(8, "I", S.STATE_GOAL_REACHED, message, now=now)
                 return
+            self._log_state(S.STATE_FOLLOWING, f"following the {self.path.name} path")
+            self.get_logger().debug(f"primitive {d.name}: cost {d.total_cost:.2f}, progress {d.progress:.3f}")
+            self._publish(d.primitive_id, d.name, S.STATE_FOLLOWING, "following", d, now=now)
+            return
         state, reason = blocked
         if state == S.STATE_WAITING:             # only odometry problems wait
             self.stale_decisions += 1           # a decision refused for a stale or missing pose
