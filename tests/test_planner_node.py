@@ -240,3 +240,49 @@ def test_odometry_with_an_old_stamp_blocks_decisions_and_is_counted(launch, prob
     decided = [s for s in status if s.state == PlannerStatus.STATE_FOLLOWING]
     assert all(0.0 <= s.pose_age < 1.0 for s in decided), [s.pose_age for s in decided]
     assert node.stop() == 0
+
+
+def test_status_says_where_the_path_is_tighter_than_the_frog_can_turn(launch, probe, library):
+    """The synthetic kinematics' tightest steady circle is u / w = 5 mm/s / 0.5 rad/s = 1 cm (G, H);
+    a paper sine scaled to 7 cm has a smallest radius l A / f^2 = 5.95 mm: the status says so and
+    the node warns once; switched live to a line, nothing is too tight."""
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    from soft_robot_interfaces.msg import PlannerStatus
+    length = 0.07
+    node = launch("planner_node", params={"library_file": str(library), "period": 0.5, "path_type": "sine",
+                                          "path_length": length, "feasibility_lookahead": 0.1,
+                                          "odom_topic": "/test/odom"})
+    status = []
+    probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
+    odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
+    node.wait_for_log("following a sinusoid path", timeout=60)
+    assert "tightest steady turn: left 1.0 cm (H), right 1.0 cm (G)" in node.log_text() or \
+        "tightest steady turn: left 1.0 cm (G), right 1.0 cm (H)" in node.log_text(), node.log_text()
+    node.wait_for_log(r"the sinusoid path bends tighter than the frog can turn over \d+ % of its length", timeout=5)
+    probe.wait_matched(odom_pub)
+
+    def following():
+        odom_pub.publish(_odom(0.0, 0.0, 0.0))
+        return any(s.state == PlannerStatus.STATE_FOLLOWING for s in status)
+    probe.spin_until(following, 20, "a decision on the sine")
+    s = [s for s in status if s.state == PlannerStatus.STATE_FOLLOWING][-1]
+    assert s.path_too_tight
+    assert s.turn_radius_limit == pytest.approx(0.01, rel=0.05)
+    assert s.path_radius_ahead == pytest.approx(length * 8.5 / 10.0 ** 2, rel=0.05)
+    assert "tighter than the frog's 1.0 cm turn: cutting" in s.message, s.message
+
+    setter = probe.node.create_client(SetParameters, "/planner_node/set_parameters")
+    probe.wait_for_service(setter)
+    p = ParameterMsg(name="path_type", value=ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="line"))
+    assert probe.call(setter, SetParameters.Request(parameters=[p])).results[0].successful
+    node.wait_for_log("the line path is within the frog's turning circle everywhere", timeout=10)
+    status.clear()
+
+    def straight():
+        odom_pub.publish(_odom(0.0, 0.0, 0.0))
+        return any(s.state == PlannerStatus.STATE_FOLLOWING for s in status)
+    probe.spin_until(straight, 20, "a decision on the line")
+    s = [s for s in status if s.state == PlannerStatus.STATE_FOLLOWING][-1]
+    assert not s.path_too_tight and s.path_radius_ahead == math.inf and "cutting" not in s.message

@@ -438,6 +438,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
                            "limb_strength_sd": args.limb_strength_sd, "kick_strength_sd": args.kick_strength_sd,
                            "yaw_disturbance_sd": args.yaw_disturbance_sd,
                            "yaw_disturbance_tau_s": args.yaw_disturbance_tau}
+    metrics["feasibility"] = twin_report.feasibility(args.library, settings, rec.path, path_settings.goal_tolerance)
     w = settings.weights
     twin_report.plot_run(rec, metrics, out.parent / f"{name}.png", weights=(w.distance, w.heading, w.progress))
     metrics["plot"] = str(out.parent / f"{name}.png")

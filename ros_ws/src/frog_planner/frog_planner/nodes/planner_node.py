@@ -36,6 +36,7 @@ from soft_robot_common.diagnostics import ERROR, OK, WARN
 from std_msgs.msg import Empty
 from std_srvs.srv import Trigger
 
+from frog_planner.core.feasibility import radius_ahead, steady_turns, tight_stretches, turning_limits
 from frog_planner.core.library_file import LibraryFormatError
 from frog_planner.core.planner import Planner
 from frog_planner.core.settings import PathSettings, PlannerSettings
@@ -51,6 +52,8 @@ _NODE_PARAMS = [
     Param("stale_periods", 2.0, "odometry received, or stamped, longer ago than this many periods is stale: "
           "primitive I until a fresh one arrives", min=0.1, max=100.0, live=True),
     Param("autostart", True, "start following at once (else wait for ~/start)"),
+    Param("feasibility_lookahead", 0.1, "the status compares the path's tightest bend this far ahead with the "
+          "frog's tightest steady turn (path_too_tight)", min=0.0, max=10.0, live=True),
     Param("initial_progress", 0.0, "progress along the path to start from, in [0, 1] (a restarted planner "
           "resumes where it was)", min=0.0, max=1.0),
 ]
@@ -110,6 +113,7 @@ class PlannerNode(Node):
         self.create_subscription(Empty, "frog/stop", self.on_stop_topic, qos)
         self.model = None
         self.planner = None
+        self.limits = None              # the frog's steady turning circles (feasibility), from the model
         self.library_error = None
         self.load_library()
         if self.planner is not None and p["initial_progress"] > 0:
@@ -141,13 +145,36 @@ class PlannerNode(Node):
                 self.model = TransitionModel.load(p["library_file"], **self.settings.model_kwargs())
                 self.planner = Planner(self.model, self.path, **self.settings.planner_kwargs())
                 self.library_error = None
+                self.limits = turning_limits(steady_turns(self.model, self.settings.period))
                 self.get_logger().info(f"library {p['library_file']}: {self.model.n_states} states, "
-                                       f"{self.model.n_primitives} primitives")
+                                       f"{self.model.n_primitives} primitives; {self.limits.describe()}")
+                self.log_feasibility()
                 return
             except (LibraryFormatError, ValueError, OSError) as exc:
                 self.library_error = f"cannot use library {p['library_file']!r}: {exc}"
         self.library_error += " (set library_file to fix it: ros2 param set <node> library_file <file>)"
         self.get_logger().error(self.library_error + "; publishing primitive I until fixed")
+
+    def log_feasibility(self) -> None:
+        """Say once per path and library where the path bends tighter than the frog can turn."""
+        tight = tight_stretches(self.path, self.limits)
+        if not tight:
+            self.get_logger().info(f"the {self.path.name} path is within the frog's turning circle everywhere")
+            return
+        share = sum(t["end_m"] - t["start_m"] for t in tight) / self.path.length
+        where = ", ".join(f"{t['start']:.2f}-{t['end']:.2f} (r {t['min_radius_m'] * 100:.1f} cm)" for t in tight)
+        self.get_logger().warning(f"the {self.path.name} path bends tighter than the frog can turn over "
+                                  f"{share * 100:.0f} % of its length, at progress {where}: it will cut there")
+
+    def feasibility(self, progress: float):
+        """(turn_radius_limit, path_radius_ahead, too_tight) at ``progress`` along the path."""
+        if self.limits is None:
+            return math.nan, math.nan, False
+        r, side = radius_ahead(self.path, progress, self.cfg["feasibility_lookahead"])
+        if side == 0:
+            return min(self.limits.left_m, self.limits.right_m), r, False
+        limit = self.limits.radius(side)
+        return limit, r, r < limit
 
     def on_parameters(self, changed: dict) -> None:
         """Apply live changes: planner settings keep the progress, a new path starts over."""
@@ -155,7 +182,7 @@ class PlannerNode(Node):
         self.settings = _settings(PlannerSettings, p, _PLANNER_FIELDS)
         if "library_file" in changed:
             progress = self.planner.progress if self.planner is not None else 0.0
-            self.model = self.planner = None
+            self.model = self.planner = self.limits = None
             self.load_library()
             if self.planner is not None:
                 self.planner.reset(progress)
@@ -169,6 +196,8 @@ class PlannerNode(Node):
             self.path_settings = _settings(PathSettings, p, _PATH_FIELDS)
             self.goal_reached = False
             self.publish_path()
+            if self.limits is not None:
+                self.log_feasibility()
             progress = 0.0
         else:
             progress = self.planner.progress if self.planner is not None else 0.0
@@ -302,6 +331,11 @@ class PlannerNode(Node):
             status.distance_to_path = float(decision.distance_to_path)
         elif self.planner is not None:
             status.path_progress = float(self.planner.progress)
+        limit, ahead, tight = self.feasibility(status.path_progress)
+        status.turn_radius_limit, status.path_radius_ahead, status.path_too_tight = limit, ahead, tight
+        if tight and state == self._Status.STATE_FOLLOWING:
+            status.message = (f"{message}; the path ahead bends at r {ahead * 100:.1f} cm, tighter than the "
+                              f"frog's {limit * 100:.1f} cm turn: cutting")
         self.status_pub.publish(status)
 
     def _log_state(self, state: int, message: str) -> None:

@@ -56,6 +56,31 @@ def run_metrics(rec: TwinRecording, path_name: str) -> dict:
     return m
 
 
+def feasibility(library_file, settings, path_points, goal_tolerance: float) -> dict:
+    """Where the path is tighter than the frog can turn, and the best mean distance one could hope for.
+
+    The frog's steady turning circles come from the planner's own transition model (the
+    library the planner used, with its settings); see :mod:`frog_planner.core.feasibility`.
+    """
+    from frog_planner.core.feasibility import steady_turns, tight_stretches, turning_limited_floor, turning_limits
+    from frog_planner.core.paths import Path
+    from frog_planner.core.transition_model import TransitionModel
+    model = TransitionModel.load(library_file, **settings.model_kwargs())
+    limits = turning_limits(steady_turns(model, settings.period))
+    path = Path(np.asarray(path_points, dtype=float), n_points=len(path_points), goal_tolerance=goal_tolerance)
+    tight = tight_stretches(path, limits)
+    floor = turning_limited_floor(path, limits)
+    return {"turn_radius_left_m": limits.left_m, "turn_radius_right_m": limits.right_m,
+            "steady_turns": {t.primitive: {"radius_m": t.radius_m, "yaw_per_period_rad": t.yaw_per_period_rad,
+                                           "speed_m_per_s": t.speed_m_per_s} for t in limits.turns},
+            "tight_stretches": tight,
+            "tight_share": sum(t["end_m"] - t["start_m"] for t in tight) / path.length,
+            "path_min_radius_m": float(1.0 / np.max(np.abs(path.curvatures))) if np.any(path.curvatures)
+            else float("inf"),
+            "floor_mean_distance_m": floor.mean_distance_m, "straight_cut_m": floor.straight_cut_m,
+            "floor_curve": floor.points.tolist()}
+
+
 def plot_run(rec: TwinRecording, metrics: dict, png, weights=(500.0, 50.0, 300.0)) -> None:
     """Fig. 5d-f (true, tracked and reference paths), Fig. 5g (distance), Fig. S3 (costs), vision error."""
     import matplotlib
@@ -70,6 +95,18 @@ def plot_run(rec: TwinRecording, metrics: dict, png, weights=(500.0, 50.0, 300.0
         seg = pts.reshape(-1, 2, 2) * 100
         ax.plot(seg[:, :, 0].T, seg[:, :, 1].T, color="tab:green", alpha=0.2, lw=0.7)
     ax.plot(rec.path[:, 0] * 100, rec.path[:, 1] * 100, "k--", lw=1.3, label="reference path")
+    feas = metrics.get("feasibility")
+    if feas:
+        arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(rec.path, axis=0), axis=1))]
+        r_turn = min(feas["turn_radius_left_m"], feas["turn_radius_right_m"]) * 100
+        for i, t in enumerate(feas["tight_stretches"]):
+            on = (arc >= t["start_m"] - 1e-9) & (arc <= t["end_m"] + 1e-9)
+            ax.plot(rec.path[on, 0] * 100, rec.path[on, 1] * 100, color="tab:red", lw=5, alpha=0.35,
+                    label=None if i else f"tighter than the frog's turn (r < {r_turn:.1f} cm)")
+        if feas["tight_stretches"] and len(feas["floor_curve"]):
+            fc = np.asarray(feas["floor_curve"])
+            ax.plot(fc[:, 0] * 100, fc[:, 1] * 100, color="0.45", lw=1.0,
+                    label=f"best turning-limited cut ({feas['floor_mean_distance_m'] * 100:.2f} cm)")
     ax.plot(rec.truth[:, 1] * 100, rec.truth[:, 2] * 100, color="tab:blue", lw=1.6, label="true path (simulator)")
     if len(rec.tracked):
         ax.plot(rec.tracked[:, 1] * 100, rec.tracked[:, 2] * 100, ":", color="tab:orange", lw=1.4,
@@ -87,6 +124,10 @@ def plot_run(rec: TwinRecording, metrics: dict, png, weights=(500.0, 50.0, 300.0
     hw = metrics.get("hardware_mean_distance_cm")
     if hw:
         ax.axhspan(hw[0], hw[1], color="0.85", label=f"real robot mean {hw[0]}-{hw[1]} cm")
+    if feas:
+        ax.axhline(feas["floor_mean_distance_m"] * 100, color="0.45", lw=1.0,
+                   label=f"floor: best turning-limited cut, mean {feas['floor_mean_distance_m'] * 100:.2f} cm")
+    if hw or feas:
         ax.legend(fontsize=8)
     ax.set(xlabel="time [s]", ylabel="distance to path [cm]",
            title=f"mean {metrics['mean_distance_m'] * 100:.2f} cm, max {metrics['max_distance_m'] * 100:.2f} cm")
@@ -160,16 +201,19 @@ def write_video(rec: TwinRecording, mp4, project=None, fps: float = 10.0) -> int
 def summary_table(results: list[dict]) -> str:
     """The printed table: twin figures beside the real robot's."""
     head = (f"{'path':8s} {'goal':>4} {'time s':>7} {'mean cm':>8} {'max cm':>7} {'real mean cm':>12} "
-            f"{'cm/s':>5} {'real cm/s':>9} {'vision mm':>9} {'vision deg':>10} {'latency ms':>10}  primitives")
+            f"{'floor cm':>8} {'tight %':>7} {'cm/s':>5} {'real cm/s':>9} {'vision mm':>9} {'vision deg':>10} "
+            f"{'latency ms':>10}  primitives")
     rows = [head, "-" * len(head)]
     for m in results:
         hw = m.get("hardware_mean_distance_cm")
         v = m.get("vision") or {}
         lat = m["latency_decision_to_firing"]["median_s"]
+        f = m.get("feasibility") or {}
         rows.append(
             f"{m['path']:8s} {'yes' if m['completion_time_s'] is not None else 'no':>4} "
             f"{(m['completion_time_s'] or float('nan')):7.1f} {m['mean_distance_m'] * 100:8.2f} "
             f"{m['max_distance_m'] * 100:7.2f} {(f'{hw[0]}-{hw[1]}' if hw else '-'):>12} "
+            f"{f.get('floor_mean_distance_m', math.nan) * 100:8.2f} {f.get('tight_share', math.nan) * 100:7.0f} "
             f"{m['mean_speed_along_path_m_per_s'] * 100:5.2f} {'1.4-2.8':>9} "
             f"{(v.get('position_mean_m', float('nan')) * 1000):9.2f} "
             f"{math.degrees(v.get('heading_mean_rad', float('nan'))):10.2f} "
