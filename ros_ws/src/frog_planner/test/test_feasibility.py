@@ -120,3 +120,17 @@ def test_bad_arguments_are_named(model):
         steady_turns(model, float("nan"))
     with pytest.raises(ValueError, match="settle"):
         steady_turns(model, PERIOD, periods=10, settle=9)
+
+
+def test_the_curve_gradient_matches_finite_differences():
+    from frog_planner.core.feasibility import _curve_gradient, _curve_parts
+    rng = np.random.default_rng(1)
+    n, per, start = 7, 3, np.array([0.1, -0.2])
+    z = np.r_[0.3, 0.4, rng.normal(0.0, 5.0, n)]
+    w = rng.normal(size=(n * per + 1, 2))
+
+    def f(z):
+        return float(np.sum(w * _curve_parts(start, z[0], z[2:], z[1], per)[0]))
+    dh, dl, dk = _curve_gradient(_curve_parts(start, z[0], z[2:], z[1], per), w, per)
+    fd = np.array([(f(z + e) - f(z - e)) / 2e-6 for e in np.eye(len(z)) * 1e-6])
+    np.testing.assert_allclose(np.r_[dh, dl, dk], fd, atol=1e-7)

@@ -189,16 +189,40 @@ class Floor:
 
 def _curve(start, heading, kappa, length, per_segment):
     """Points of a curve of piecewise-constant curvature ``kappa`` (N segments of length/N)."""
+    return _curve_parts(start, heading, kappa, length, per_segment)[0]
+
+
+def _curve_parts(start, heading, kappa, length, per_segment):
+    """The points, and what :func:`_curve_gradient` needs: step length, substep curvatures and headings."""
     ds = length / (len(kappa) * per_segment)
     k = np.repeat(kappa, per_segment)
-    theta = heading + np.concatenate([[0.0], np.cumsum(k * ds)])
-    # exact arcs would need a branch at k = 0; midpoint headings are accurate to O(ds^2)
-    mid = 0.5 * (theta[:-1] + theta[1:])
+    before = np.concatenate([[0.0], np.cumsum(k)[:-1]])            # curvature summed over earlier substeps
+    # heading at each substep's midpoint (exact arcs would need a branch at k = 0; O(ds^2))
+    mid = heading + ds * (before + 0.5 * k)
     xy = np.cumsum(np.column_stack([np.cos(mid), np.sin(mid)]) * ds, axis=0)
-    return np.vstack([start, start + xy])
+    return np.vstack([start, start + xy]), ds, k, before, mid
 
 
-def turning_limited_floor(path, limits: TurningLimits, segments: int = 40, per_segment: int = 5,
+def _curve_gradient(parts, weights, per_segment):
+    """Gradient of sum_i weights_i . p_i with respect to (heading, length, kappa) of :func:`_curve`.
+
+    ``weights`` (M + 1, 2) is d(objective)/d(point i). Point i sums the substeps m < i, so each
+    substep sees the suffix sum of the weights after it; then the chain rule through the
+    midpoint headings (reverse accumulation: O(M)).
+    """
+    _, ds, k, before, mid = parts
+    suffix = np.cumsum(weights[::-1], axis=0)[::-1][1:]          # G_m = sum_{i > m} w_i, (M, 2)
+    u = np.column_stack([np.cos(mid), np.sin(mid)])
+    a = ds * (suffix[:, 0] * -u[:, 1] + suffix[:, 1] * u[:, 0])  # d/d(mid_m)
+    d_heading = a.sum()
+    d_ds = float(np.sum(suffix * u)) + float(np.sum(a * (before + 0.5 * k)))
+    later = np.concatenate([np.cumsum(a[::-1])[::-1][1:], [0.0]])  # sum_{m > l} a_m
+    d_k = ds * (later + 0.5 * a)
+    d_kappa = d_k.reshape(-1, per_segment).sum(axis=1)
+    return d_heading, d_ds / len(k), d_kappa          # d/d(length): ds = length / M
+
+
+def turning_limited_floor(path, limits: TurningLimits, segments: int = 20, per_segment: int = 5,
                           spacing: float = 5e-4) -> Floor:
     """Smallest mean distance to ``path`` of a curve from its start to its end within the turn limits.
 
@@ -217,19 +241,39 @@ def turning_limited_floor(path, limits: TurningLimits, segments: int = 40, per_s
     tol = float(getattr(path, "goal_tolerance", 0.03))
     lo, hi = -1.0 / limits.right_m, 1.0 / limits.left_m
     chord = goal - start
-    straight = _curve(start, np.arctan2(chord[1], chord[0]), np.zeros(segments), float(np.hypot(*chord)),
-                      per_segment)
+    fine = max(per_segment, 1000 // segments)     # the result is measured on ~1000 points of the curve
+    straight = _curve(start, np.arctan2(chord[1], chord[0]), np.zeros(segments), float(np.hypot(*chord)), fine)
     straight_cut = float(_distance_to_polyline(straight, ref).mean())
     scale = max(path.length, 1e-6)
 
+    n_points = segments * per_segment + 1
+
+    def parts(z):
+        return _curve_parts(start, z[0], z[2:], z[1] * scale, per_segment)
+
     def points(z):
-        return _curve(start, z[0], z[2:], z[1] * scale, per_segment)
+        return parts(z)[0]
+
+    def pulled_back(z, pr, weights):     # d/dz of sum_i weights_i . p_i (length = z[1] * scale)
+        dh, dlen, dk = _curve_gradient(pr, weights, per_segment)
+        return np.r_[dh, dlen * scale, dk]
 
     def mean_distance(z):
-        return float(tree.query(points(z))[0].mean()) / scale
+        pr = parts(z)
+        dist, idx = tree.query(pr[0])
+        off = pr[0] - tree.data[idx]
+        unit = off / np.maximum(dist, 1e-12)[:, None]
+        return float(dist.mean()) / scale, pulled_back(z, pr, unit / (n_points * scale))
 
     def reach(z):                       # >= 0: the end is within the goal tolerance (squared, smooth)
-        return ((tol / scale) ** 2 - float(np.sum((points(z)[-1] - goal) ** 2)) / scale ** 2) * 1e3
+        end = points(z)[-1]
+        return ((tol / scale) ** 2 - float(np.sum((end - goal) ** 2)) / scale ** 2) * 1e3
+
+    def reach_gradient(z):
+        pr = parts(z)
+        w = np.zeros((n_points, 2))
+        w[-1] = -2e3 * (pr[0][-1] - goal) / scale ** 2
+        return pulled_back(z, pr, w)
 
     bounds = [(-4 * np.pi, 4 * np.pi), (0.05, 2.0)] + [(lo, hi)] * segments
     s_mid = (np.arange(segments) + 0.5) / segments
@@ -237,9 +281,10 @@ def turning_limited_floor(path, limits: TurningLimits, segments: int = 40, per_s
               np.r_[np.arctan2(chord[1], chord[0]), max(np.hypot(*chord) / scale, 0.05), np.zeros(segments)]]
     best, best_mean = None, np.inf
     for z0 in starts:
-        res = minimize(mean_distance, z0, method="SLSQP", bounds=bounds,
-                       constraints=[{"type": "ineq", "fun": reach}], options={"maxiter": 300, "ftol": 1e-9})
-        pts = points(res.x)
+        res = minimize(mean_distance, z0, jac=True, method="SLSQP", bounds=bounds,
+                       constraints=[{"type": "ineq", "fun": reach, "jac": reach_gradient}],
+                       options={"maxiter": 300, "ftol": 1e-10})
+        pts = _curve(start, res.x[0], res.x[2:], res.x[1] * scale, fine)
         mean = float(_distance_to_polyline(pts, ref).mean())
         if np.hypot(*(pts[-1] - goal)) <= tol * 1.01 and mean < best_mean:
             best, best_mean = pts, mean
