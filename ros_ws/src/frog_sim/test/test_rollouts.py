@@ -180,6 +180,9 @@ def test_depth_two_reuses_the_first_periods_and_threads_agree(rollouts):
     assert res.stats["jobs"] == (3 + 8 + 1) * (1 + 9)
     single = Rollouts(threads=1).rollout_batch(start, seqs[:20], period=PERIOD)
     assert np.array_equal(single.transitions, res.transitions[:20])
+    # an end is a start (its own t = 0): continuing from it is the second period (to round-off)
+    later = rollouts.rollout_batch(res.ends[("C",)], [("H",)], period=PERIOD)
+    assert later.pose[0, 0] == pytest.approx(res.pose[seqs.index(("C", "H")), 1], abs=1e-9)
 
 
 def test_bad_input_is_named(rollouts):

@@ -15,11 +15,13 @@ simulator itself what each primitive sequence does from the robot's estimated st
   what the estimate loses).
 * **Rollouts** (:meth:`Rollouts.rollout_batch`): each sequence of primitives, one per
   period, from that start. Sequences share prefixes: depth 2 runs the 9 first periods once
-  and the 81 second periods from their end states. Every period of every branch is one
-  job; all jobs of a tree level run in one compiled call (:func:`_run_jobs`, numba
-  ``prange`` over the jobs, one prebuilt simulator per thread, reset by copying arrays:
-  no Python copies per branch). The step is the integrator's own :func:`run_direct`, so a
-  rollout is the trajectory ``FrogSimulation.step`` computes with the same step sizes.
+  and the 81 second periods from their end states; within a period the primitives that
+  fire the same front limbs (A/B, C/E/G, D/F/H) share the steps before the rear limbs fire.
+  Each such stretch of a branch is a job; the jobs whose parents are done run in one
+  compiled call per thread (:func:`_run_jobs`, GIL released, jobs taken from an atomic
+  counter), each thread on its own prebuilt simulator reset by copying arrays: no Python
+  copies per branch. The step is the integrator's own :func:`run_direct`, so a rollout is
+  the trajectory ``FrogSimulation.step`` computes with the same steps.
 * **Step plan** (:meth:`Rollouts.step_plan`): the kick is where the time step matters; the
   coast after it is smooth. A period is stepped with ``kick_time_step`` (default the
   simulator's 2 ms) until ``kick_window`` after the last firing, then with steps of at most
@@ -41,7 +43,7 @@ import math
 import os
 from collections import namedtuple
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numba import njit, types
@@ -75,7 +77,7 @@ _FrontGroup = namedtuple('_FrontGroup', 'prefix front_limbs')
 
 @dataclass
 class RolloutStart:
-    """The full simulator state a rollout starts from; its time origin is the start (t = 0).
+    """The full simulator state a rollout starts from; the start is t = 0 of its clock.
 
     Attributes
     ----------
@@ -84,8 +86,7 @@ class RolloutStart:
     v_old : ndarray, shape (2N,)
         Velocity of the step before (the integrator's predictor; ``v`` for a fresh state).
     last_firing : ndarray, shape (4,)
-        Time of each limb's last firing [s] (FL, FR, BL, BR; -inf if never) on the rollout
-        clock (the decision is t = 0).
+        Time of each limb's last firing [s] (FL, FR, BL, BR; <= 0, -inf if never).
     pose : ndarray, shape (3,)
         Centre of mass x, y [m] and heading [rad] (eq. 10-11) of this state.
     twist : ndarray, shape (3,), optional
@@ -121,7 +122,7 @@ class RolloutResult:
     converged : ndarray of bool, shape (B,)
     ends : dict
         Prefix (tuple of names) -> :class:`RolloutStart` at the end of its last period: the
-        full state (node positions ...), from which a deeper search can continue.
+        full state (node positions ...), with that end as t = 0 (a start to continue from).
     stats : dict
         Jobs (simulated stretches), steps, Newton iterations, LU factorisations, fallbacks
         (jobs redone with step halving), failed (jobs that did not converge).
@@ -569,7 +570,9 @@ class Rollouts:
                 transitions[b, k, :2] = to_body @ (end.pose[:2] - start.pose[:2])
                 transitions[b, k, 2] = end.pose[2] - start.pose[2]
                 transitions[b, k, 3:] = end.twist
-        ends = {key: end for key, end in done.items() if key and not isinstance(key, _FrontGroup)}
+        # the jobs run on the decision's clock; an end handed out is its own t = 0
+        ends = {key: replace(end, last_firing=end.last_firing - len(key) * period)
+                for key, end in done.items() if key and not isinstance(key, _FrontGroup)}
         return RolloutResult(sequences=seqs, transitions=transitions, pose=poses, converged=converged, ends=ends,
                              stats=stats)
 
