@@ -196,8 +196,10 @@ def main(argv=None):
     print(f'  decision wall time (budget {BUDGET_SHARE:g} x {period:g} s = {budget:.2f} s), median [min-max]:')
     for name, wall, cpu, n in (('depth 1', d1_wall, d1_cpu, len(prims)), ('depth 2', d2_wall, d2_cpu, n2)):
         verdict = 'within' if med(wall) <= budget else 'OVER'
-        print(f'    {name}: {med(wall):.3f} s wall [{min(wall):.3f}-{max(wall):.3f}], {med(cpu):.3f} s CPU: '
-              f'{verdict} budget; baseline would take {n * b_wall:.2f} s wall ({n * b_cpu:.2f} s CPU) on one core')
+        cores = med(c / w for c, w in zip(cpu, wall))
+        print(f'    {name}: {med(wall):.3f} s wall [{min(wall):.3f}-{max(wall):.3f}], {med(cpu):.3f} s CPU '
+              f'({cores:.2f} cores busy): {verdict} budget; baseline would take {n * b_wall:.2f} s wall '
+              f'({n * b_cpu:.2f} s CPU) on one core')
     pos, hd = errors(batch_rows, base_rows)
     du = np.abs(batch_rows - base_rows)
     print(f'  rollouts vs baseline from the same starts (step plan + tolerance), {pos.size} one-period rollouts: '

@@ -185,6 +185,32 @@ def test_depth_two_reuses_the_first_periods_and_threads_agree(rollouts):
     assert later.pose[0, 0] == pytest.approx(res.pose[seqs.index(("C", "H")), 1], abs=1e-9)
 
 
+def test_a_failed_fast_step_is_redone_as_frog_simulation_does():
+    """With 3 Newton iterations the kick's fast steps fail: the job is redone with the
+    integrator's step halving, and matches FrogSimulation (same limit) step for step."""
+    ro = Rollouts(threads=2)
+    for sim in ro._sims:
+        sim.integrator.max_iterations = 3
+    ro._solver = ro._sims[0].integrator._solver()
+    start = ro.estimated_start(POSE, TWIST, FIRED)
+    seq = ("C", "D")
+    res = ro.rollout_batch(start, [seq, ("I",)], period=PERIOD)
+    assert res.converged.all() and res.stats["fallbacks"] >= 1 and res.stats["failed"] == 0
+    sim = FrogSimulation(force_tolerance=ro._sims[0].integrator.force_tolerance)
+    sim.integrator.max_iterations = 3
+    sim.integrator.set_state(x=start.x, v=start.v)
+    for lid, t in enumerate(start.last_firing):
+        if np.isfinite(t):
+            sim.fire_limbs([LIMB_NAMES[lid]], start=float(t))
+    for k, (prim, plan) in enumerate(zip(seq, ro.step_plan(start, seq, PERIOD))):
+        sim.execute_primitive(prim, start=k * PERIOD)
+        for n, h in plan:
+            sim.time_step = h
+            sim.step(n)
+    assert sim.integrator.stats.halvings > 0
+    assert np.abs(res.ends[seq].x - sim.integrator.x).max() < 1e-10
+
+
 def test_bad_input_is_named(rollouts):
     good = rollouts.estimated_start(POSE, TWIST)
     with pytest.raises(ValueError, match="pose"):
