@@ -270,7 +270,9 @@ class Rollouts:
                              f'{kick_time_step!r} s')
         if not (np.isfinite(kick_window) and kick_window >= 0):
             raise ValueError(f'kick_window = {kick_window!r} s must be >= 0')
-        threads = len(os.sched_getaffinity(0)) if threads is None else int(threads)
+        if threads is None:
+            threads = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count() or 1
+        threads = int(threads)
         if not 1 <= threads <= 64:
             raise ValueError(f'threads = {threads} must be in 1-64')
         self.kick_time_step = float(kick_time_step)
