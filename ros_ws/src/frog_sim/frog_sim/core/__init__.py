@@ -13,5 +13,6 @@ Modules (one concern each):
 * ``frog_model``       - the square robot of Fig. 2 as a rod network
 * ``rigid_body``       - eq. 10-13 (COM, heading, velocities, yaw rate and inverse)
 * ``simulation``       - public API: ``FrogSimulation``, ``Trajectory``
+* ``rollouts``         - batched rollouts from an estimated state for the planner (``Rollouts``)
 * ``reference_numpy``  - plain numpy/scipy version of the step (benchmark baseline)
 """
