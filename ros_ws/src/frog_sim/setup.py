@@ -22,6 +22,7 @@ setup(
     entry_points={
         'console_scripts': [
             'sim_node = frog_sim.nodes.sim_node:main',
+            'rollout_node = frog_sim.nodes.rollout_node:main',
             'frog-library = frog_sim.library_cli:main',
             'frog-sweep = frog_sim.sweep_cli:main',
             'frog-sim = frog_sim.cli:main',

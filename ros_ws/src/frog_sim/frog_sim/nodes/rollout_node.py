@@ -1,0 +1,161 @@
+"""``rollout_node``: the DER simulator as a transition model for the planner (issue 19).
+
+Service ``frog/rollouts`` (soft_robot_interfaces/Rollouts): from the robot's estimated
+state (tracked pose, body twist, and how long ago each limb was fired) it rolls out every
+primitive sequence of depth 1 or 2 (9 or 81; shared prefixes are simulated once) with
+:class:`frog_sim.core.rollouts.Rollouts` and returns the transitions level by level, in the
+layout of the motion library: ``planner_node`` with ``transitions:=simulator`` chains them
+by eq. 18 exactly as it chains library transitions. The model is compiled and warmed up at
+start-up (``ready`` in the log and on ``diagnostics``), so the first request is as fast as
+the others.
+
+    ros2 run frog_sim rollout_node --ros-args -p threads:=2
+    ros2 service call /frog/rollouts soft_robot_interfaces/srv/Rollouts "{period: 1.43, depth: 1}"
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import sys
+import time
+
+import numpy as np
+from rclpy.node import Node
+from soft_robot_common import MessageGate, Param, declare_parameters, run_node
+from soft_robot_common.diagnostics import OK, WARN, NodeDiagnostics
+from soft_robot_interfaces.srv import Rollouts as RolloutsSrv
+
+from frog_sim.core.rollouts import COAST_TIME_STEP, KICK_WINDOW, ROLLOUT_FORCE_TOLERANCE, Rollouts
+from frog_sim.core.schedules import LIMB_NAMES, PRIMITIVE_NAMES
+from frog_sim.core.simulation import DEFAULT_TIME_STEP
+
+MAX_DEPTH = 2
+
+PARAMS = [
+    Param("threads", 0, "threads the rollouts are spread over; 0 = the CPUs this process may use", min=0, max=64),
+    Param("kick_time_step", DEFAULT_TIME_STEP, "time step during the kick window [s]", min=1e-4, max=0.01),
+    Param("coast_time_step", COAST_TIME_STEP, "longest time step after the kick window [s]", min=1e-4, max=0.05),
+    Param("kick_window", KICK_WINDOW, "fine steps for this long after each firing [s]", min=0.0, max=5.0),
+    Param("force_tolerance", ROLLOUT_FORCE_TOLERANCE, "Newton residual tolerance [N]", min=1e-9, max=1e-2),
+]
+
+
+def tree_transitions(result, start_pose, depth: int, n_primitives: int) -> np.ndarray:
+    """Rows of 6 level by level (P^d rows at level d, base-P order), each in its own period's start frame.
+
+    ``result.transitions`` holds every period end relative to the sequence's start; the
+    planner chains one period at a time (eq. 18), so level d > 1 is re-expressed from the
+    end of period d - 1 (its pose in ``result.pose``).
+    """
+    p = n_primitives
+    poses = result.pose.reshape((p,) * depth + (depth, 3))
+    twists = result.transitions[..., 3:].reshape((p,) * depth + (depth, 3))
+    start = None
+    levels = []
+    for d in range(depth):
+        idx = (slice(None),) * (d + 1) + (0,) * (depth - d - 1) + (d,)   # the first child's copy
+        end_pose, end_twist = poses[idx].reshape(-1, 3), twists[idx].reshape(-1, 3)
+        if start is None:
+            base = np.broadcast_to(np.asarray(start_pose, dtype=float), end_pose.shape)
+        else:
+            base = np.repeat(start, p, axis=0)
+        c, s = np.cos(base[:, 2]), np.sin(base[:, 2])
+        dx, dy = end_pose[:, 0] - base[:, 0], end_pose[:, 1] - base[:, 1]
+        levels.append(np.column_stack([c * dx + s * dy, -s * dx + c * dy, end_pose[:, 2] - base[:, 2], end_twist]))
+        start = end_pose
+    return np.concatenate(levels)
+
+
+class RolloutNode(Node):
+    """See the module docstring; parameters in ``PARAMS``."""
+
+    NODE_NAME = "rollout_node"
+
+    def __init__(self, **kwargs):
+        super().__init__("rollout_node", **kwargs)
+        self.cfg = declare_parameters(self, PARAMS)
+        p = self.cfg
+        self.gate = MessageGate(self)     # non-finite or oversized requests are refused
+        t0 = time.monotonic()
+        self.rollouts = Rollouts(threads=p["threads"] or None, kick_time_step=p["kick_time_step"],
+                                 coast_time_step=max(p["coast_time_step"], p["kick_time_step"]),
+                                 kick_window=p["kick_window"], force_tolerance=p["force_tolerance"])
+        # compile and warm up now, not in the first decision
+        warm = self.rollouts.estimated_start((0.0, 0.0, 0.0), (0.01, 0.0, 0.0))
+        self.rollouts.rollout_batch(warm, [("B",), ("C",)], period=0.5)
+        self.requests = self.failures = 0
+        self.last_compute = math.nan
+        self.create_service(RolloutsSrv, "frog/rollouts", self.on_request)
+        self.diagnostics = NodeDiagnostics(self, "rollouts", self._diagnostics)
+        self.get_logger().info(f"ready in {time.monotonic() - t0:.1f} s: {self.rollouts.threads} thread(s), "
+                               f"step {p['kick_time_step'] * 1e3:.1f} ms for {p['kick_window']} s after a "
+                               f"firing, then <= {p['coast_time_step'] * 1e3:.1f} ms; service "
+                               f"{self.resolve_service_name('frog/rollouts')}")
+
+    def _diagnostics(self):
+        level = OK if not self.failures else WARN
+        return level, "ready", {"requests": self.requests, "failures": self.failures,
+                                "last_compute_s": self.last_compute, "threads": self.rollouts.threads}
+
+    def _refuse(self, response, reason: str):
+        self.failures += 1
+        self.get_logger().error(f"rollouts refused: {reason}", throttle_duration_sec=1.0)
+        response.success, response.message = False, reason
+        return response
+
+    def on_request(self, request, response):
+        self.requests += 1
+        problem = self.gate.problem(request, stamped=False)
+        if problem:
+            return self._refuse(response, problem)
+        if not 1 <= request.depth <= MAX_DEPTH:
+            return self._refuse(response, f"depth {request.depth} is out of range 1-{MAX_DEPTH}")
+        if not (math.isfinite(request.period) and 0.0 < request.period <= 5.0):
+            return self._refuse(response, f"period {request.period!r} s must be in (0, 5]")
+        if len(request.fired_limbs) != len(request.fired_ago):
+            return self._refuse(response, f"{len(request.fired_limbs)} fired_limbs but "
+                                          f"{len(request.fired_ago)} fired_ago")
+        fired = {}
+        for limb, ago in zip(request.fired_limbs, request.fired_ago):
+            if limb not in LIMB_NAMES:
+                return self._refuse(response, f"fired_limbs: unknown limb {limb!r}; expected one of "
+                                              f"{', '.join(LIMB_NAMES)}")
+            if not (math.isfinite(ago) and ago >= 0.0):
+                return self._refuse(response, f"fired_ago of {limb} = {ago!r} s must be finite and >= 0")
+            fired[limb] = -float(ago)
+        pose = (request.pose.x, request.pose.y, request.pose.theta)
+        twist = (request.twist.linear.x, request.twist.linear.y, request.twist.angular.z)
+        t0 = time.monotonic()
+        try:
+            start = self.rollouts.estimated_start(pose, twist, fired, now=0.0)
+            seqs = list(itertools.product(PRIMITIVE_NAMES, repeat=request.depth))
+            result = self.rollouts.rollout_batch(start, seqs, period=request.period)
+        except ValueError as exc:
+            return self._refuse(response, str(exc))
+        rows = tree_transitions(result, pose, request.depth, len(PRIMITIVE_NAMES))
+        self.last_compute = time.monotonic() - t0
+        if not np.all(np.isfinite(rows)):
+            return self._refuse(response, f"{int(np.sum(~result.converged))} of {len(seqs)} rollouts did "
+                                          f"not converge")
+        response.success = True
+        st = result.stats
+        response.message = (f"{len(seqs)} sequences, {st['jobs']} jobs, {st['steps']} steps in "
+                            f"{self.last_compute:.3f} s")
+        response.primitive_names = list(PRIMITIVE_NAMES)
+        response.transitions = rows.ravel().tolist()
+        response.compute_time = self.last_compute
+        self.get_logger().debug(response.message)
+        return response
+
+    def destroy_node(self):
+        self.rollouts.close()
+        return super().destroy_node()
+
+
+def main(args=None) -> int:
+    return run_node(RolloutNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,83 @@
+"""rollout_node as a real process: the simulator's transitions of a search tree over DDS (issue 19).
+
+Truth: the same rollouts run in this process through frog_sim's core (itself tested against
+FrogSimulation.step in frog_sim/test/test_rollouts.py). The wire layout is checked by
+chaining the returned rows with the planner's own eq. 18 (frog_planner.core.prediction):
+level 1 then level 2 must land on the world poses the core computed for each pair.
+"""
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.system
+
+PERIOD = 1.0
+POSE = (0.10, 0.20, 0.30)
+TWIST = (0.02, 0.0, 0.1)
+
+
+def _request(depth, fired=(("FL", 0.3),), pose=POSE, twist=TWIST, period=PERIOD):
+    from geometry_msgs.msg import Pose2D, Twist
+    from soft_robot_interfaces.srv import Rollouts
+    t = Twist()
+    t.linear.x, t.linear.y, t.angular.z = twist
+    return Rollouts.Request(pose=Pose2D(x=pose[0], y=pose[1], theta=pose[2]), twist=t,
+                            fired_limbs=[f for f, _ in fired], fired_ago=[a for _, a in fired],
+                            period=period, depth=depth)
+
+
+def test_depth_two_tree_over_the_wire_chains_to_the_cores_poses(launch, probe):
+    from soft_robot_interfaces.srv import Rollouts
+
+    from frog_planner.core.prediction import apply_transition
+    from frog_sim.core.rollouts import Rollouts as CoreRollouts
+    node = launch("rollout_node", params={"threads": 1})
+    node.wait_for_log("ready in", timeout=240)
+    client = probe.node.create_client(Rollouts, "/frog/rollouts")
+    probe.wait_for_service(client, timeout=30)
+    res = probe.call(client, _request(2), timeout=120)
+    assert res.success, res.message
+    names = list(res.primitive_names)
+    assert names == list("ABCDEFGHI")
+    rows = np.asarray(res.transitions).reshape(-1, 6)
+    assert rows.shape == (9 + 81, 6) and res.compute_time > 0
+
+    with CoreRollouts(threads=1) as core:
+        start = core.estimated_start(POSE, TWIST, {"FL": -0.3}, now=0.0)
+        pairs = list(itertools.product(names, repeat=2))
+        truth = core.rollout_batch(start, pairs, period=PERIOD)
+    level1, level2 = rows[:9], rows[9:]
+    first_pose, first_vel = apply_transition(np.array(POSE), level1)                  # (9, 3)
+    second_pose, _ = apply_transition(np.repeat(first_pose, 9, axis=0), level2)      # (81, 3)
+    np.testing.assert_allclose(first_vel, truth.transitions[::9, 0, 3:], atol=1e-9)
+    np.testing.assert_allclose(first_pose[:, :2], truth.pose[::9, 0, :2], atol=1e-9)
+    np.testing.assert_allclose(second_pose[:, :2], truth.pose[:, 1, :2], atol=1e-9)
+    dyaw = np.angle(np.exp(1j * (second_pose[:, 2] - truth.pose[:, 1, 2])))
+    assert np.max(np.abs(dyaw)) < 1e-9
+    # B (all four limbs) goes further forward than I (nothing fired) in one period
+    assert level1[names.index("B"), 0] > level1[names.index("I"), 0] + 0.01
+
+
+BAD = [({"depth": 3}, "depth 3 is out of range 1-2"),
+       ({"period": 0.0}, "period 0.0 s must be in (0, 5]"),
+       ({"pose": (math.nan, 0.0, 0.0)}, "pose.x"),
+       ({"fired": (("XX", 0.1),)}, "unknown limb 'XX'"),
+       ({"fired": (("FL", -1.0),)}, "fired_ago of FL = -1.0 s")]
+
+
+def test_bad_requests_are_refused_with_the_reason_and_the_node_keeps_serving(launch, probe):
+    from soft_robot_interfaces.srv import Rollouts
+    node = launch("rollout_node", params={"threads": 1})
+    node.wait_for_log("ready in", timeout=240)
+    client = probe.node.create_client(Rollouts, "/frog/rollouts")
+    probe.wait_for_service(client, timeout=30)
+    for change, message in BAD:
+        res = probe.call(client, _request(**{"depth": 1, **change}), timeout=60)
+        assert not res.success and message in res.message, (change, res.message)
+        assert not res.transitions
+    good = probe.call(client, _request(1), timeout=60)
+    assert good.success and len(good.transitions) == 9 * 6
+    node.wait_for_log("rollouts refused: depth 3", timeout=5)
