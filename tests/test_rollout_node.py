@@ -52,11 +52,13 @@ def test_depth_two_tree_over_the_wire_chains_to_the_cores_poses(launch, probe):
     level1, level2 = rows[:9], rows[9:]
     first_pose, first_vel = apply_transition(np.array(POSE), level1)                  # (9, 3)
     second_pose, _ = apply_transition(np.repeat(first_pose, 9, axis=0), level2)      # (81, 3)
-    np.testing.assert_allclose(first_vel, truth.transitions[::9, 0, 3:], atol=1e-9)
-    np.testing.assert_allclose(first_pose[:, :2], truth.pose[::9, 0, :2], atol=1e-9)
-    np.testing.assert_allclose(second_pose[:, :2], truth.pose[:, 1, :2], atol=1e-9)
+    # two processes' Newton solves stop at the force tolerance, so they agree to ~1e-8, not
+    # bit for bit; a wrong layout (frame, order) is off by centimetres and tenths of radians
+    np.testing.assert_allclose(first_vel, truth.transitions[::9, 0, 3:], atol=1e-7)
+    np.testing.assert_allclose(first_pose[:, :2], truth.pose[::9, 0, :2], atol=1e-7)
+    np.testing.assert_allclose(second_pose[:, :2], truth.pose[:, 1, :2], atol=1e-7)
     dyaw = np.angle(np.exp(1j * (second_pose[:, 2] - truth.pose[:, 1, 2])))
-    assert np.max(np.abs(dyaw)) < 1e-9
+    assert np.max(np.abs(dyaw)) < 1e-6
     # B (all four limbs) goes further forward than I (nothing fired) in one period
     assert level1[names.index("B"), 0] > level1[names.index("I"), 0] + 0.01
 

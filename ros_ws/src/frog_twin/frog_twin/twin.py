@@ -426,15 +426,13 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
     metrics["unclean_stops"] = supervisor.unclean_stops()
     if faults:
         bridge = graph["bridge_node"].parameters if "bridge_node" in graph else {}
-        planner = graph["planner_node"].parameters if "planner_node" in graph else {}
-        tracker = graph["tracker_node"].parameters if "tracker_node" in graph else {}
         metrics["faults"] = fault_report(
             faults, observer, sim_start, injector, recorded_stamps(files, CHECKED_TOPICS),
-            # planner_node's stale bound (stale_periods x the period) on the estimate's stamp, + how
-            # long the tracker predicts without a detection (its estimate at a stamp then holds
+            # the design's bounds, not the run's (a sabotaged planner or tracker must not move
+            # them): planner_node's stale bound (2 periods) on the estimate's stamp, + how long
+            # the tracker predicts without a detection (its estimate at a stamp then holds
             # information from up to coast_timeout earlier), + the camera-to-planner latency
-            pose_bound=float(planner.get("stale_periods", 2.0)) * settings.period
-            + (float(tracker.get("coast_timeout", FilterSettings.coast_timeout)) if not args.no_vision else 0.0) + 0.2,
+            pose_bound=2.0 * settings.period + (FilterSettings.coast_timeout if not args.no_vision else 0.0) + 0.2,
             command_bound=float(bridge.get("max_command_age_s", 0.5)) + 0.2, goal=goal,
             stop_reason=stop_reason, unclean=metrics["unclean_stops"])
     metrics["recording"] = [str(f) for f in files]
