@@ -60,8 +60,15 @@ def test_twin_camera_tracks_the_simulated_frog(launch, probe):
     # odometry stamps are capture stamps (every one is an image stamp)
     t_e, p_e, v_e = _odom_arrays(est)
     seen = np.array([_t(s.header.stamp) for s in images])
+    # The camera captures on the grid k/fps of the node clock; every odometry stamp must lie on it.
+    # camera_info is keep-last 2, so under load the probe may miss one (CI lost one in ~210):
+    # nearly all odometry stamps must also be stamps the probe saw, not every one.
     # (frames before the probe matched, and the newest, whose camera_info may still be on its way, left out)
-    assert set(np.round(t_e[(t_e >= seen[0]) & (t_e <= seen[-1])], 6)) <= set(np.round(seen, 6))
+    k = t_e * 30.0
+    assert np.max(np.abs(k - np.round(k))) < 1e-4, "odometry stamped off the camera's capture grid"
+    inside = t_e[(t_e >= seen[0]) & (t_e <= seen[-1])]
+    unseen = set(np.round(inside, 6)) - set(np.round(seen, 6))
+    assert len(inside) > 50 and len(unseen) <= 0.05 * len(inside), f"odometry stamps no frame had: {sorted(unseen)}"
     t_s, p_s, v_s = _odom_arrays(truth)
     ok = (t_e > 1.0) & (t_e < 5.0)           # before the occlusion
     interp = np.column_stack([np.interp(t_e[ok], t_s, p_s[:, i]) for i in range(2)])
