@@ -19,14 +19,14 @@ POSE = (0.10, 0.20, 0.30)
 TWIST = (0.02, 0.0, 0.1)
 
 
-def _request(depth, fired=(("FL", 0.3),), pose=POSE, twist=TWIST, period=PERIOD):
+def _request(depth, fired=(("FL", 0.3),), pose=POSE, twist=TWIST, period=PERIOD, lead=0.0, first=()):
     from geometry_msgs.msg import Pose2D, Twist
     from soft_robot_interfaces.srv import Rollouts
     t = Twist()
     t.linear.x, t.linear.y, t.angular.z = twist
     return Rollouts.Request(pose=Pose2D(x=pose[0], y=pose[1], theta=pose[2]), twist=t,
                             fired_limbs=[f for f, _ in fired], fired_ago=[a for _, a in fired],
-                            period=period, depth=depth)
+                            period=period, depth=depth, lead=lead, first_primitives=list(first))
 
 
 def test_depth_two_tree_over_the_wire_chains_to_the_cores_poses(launch, probe):
@@ -67,7 +67,9 @@ BAD = [({"depth": 3}, "depth 3 is out of range 1-2"),
        ({"period": 0.0}, "period 0.0 s must be in (0, 5]"),
        ({"pose": (math.nan, 0.0, 0.0)}, "pose.x"),
        ({"fired": (("XX", 0.1),)}, "unknown limb 'XX'"),
-       ({"fired": (("FL", -1.0),)}, "fired_ago of FL = -1.0 s")]
+       ({"fired": (("FL", -1.0),)}, "fired_ago of FL = -1.0 s"),
+       ({"lead": -0.1}, "lead -0.1 s must be in [0, 5]"),
+       ({"first": ("Z",)}, "first_primitives: unknown ['Z']")]
 
 
 def test_bad_requests_are_refused_with_the_reason_and_the_node_keeps_serving(launch, probe):
@@ -83,3 +85,33 @@ def test_bad_requests_are_refused_with_the_reason_and_the_node_keeps_serving(lau
     good = probe.call(client, _request(1), timeout=60)
     assert good.success and len(good.transitions) == 9 * 6
     node.wait_for_log("rollouts refused: depth 3", timeout=5)
+
+
+def test_a_beam_after_a_lead_is_the_cores_coast_then_the_beams_pairs(launch, probe):
+    """lead coasts the state (nothing fired) before the tree; first_primitives keeps only a beam."""
+    from soft_robot_interfaces.srv import Rollouts
+
+    from frog_planner.core.prediction import apply_transition
+    from frog_sim.core.rollouts import Rollouts as CoreRollouts
+    node = launch("rollout_node", params={"threads": 1})
+    node.wait_for_log("ready in", timeout=240)
+    client = probe.node.create_client(Rollouts, "/frog/rollouts")
+    probe.wait_for_service(client, timeout=30)
+    lead, beam = 0.4, ("B", "G")
+    res = probe.call(client, _request(2, lead=lead, first=beam), timeout=120)
+    assert res.success, res.message
+    rows = np.asarray(res.transitions).reshape(-1, 6)
+    names = list(res.primitive_names)
+    inside = [names.index(b) for b in beam]
+    finite1 = np.all(np.isfinite(rows[:9]), axis=1)
+    finite2 = np.all(np.isfinite(rows[9:]).reshape(9, 9, 6), axis=(1, 2))
+    assert sorted(np.flatnonzero(finite1)) == sorted(inside) == sorted(np.flatnonzero(finite2))
+    with CoreRollouts(threads=1) as core:
+        start = core.estimated_start(POSE, TWIST, {"FL": -0.3}, now=0.0)
+        coasted = core.rollout_batch(start, [("I",)], period=lead).ends[("I",)]
+        truth = core.rollout_batch(coasted, [(b, c) for b in beam for c in names], period=PERIOD)
+    first_pose, _ = apply_transition(np.array(POSE), rows[inside])             # level 1 spans lead + T
+    np.testing.assert_allclose(first_pose[:, :2], truth.pose[::9, 0, :2], atol=1e-7)
+    level2 = np.concatenate([rows[9 + 9 * i:9 + 9 * (i + 1)] for i in inside])
+    second_pose, _ = apply_transition(np.repeat(first_pose, 9, axis=0), level2)
+    np.testing.assert_allclose(second_pose[:, :2], truth.pose[:, 1, :2], atol=1e-7)

@@ -337,3 +337,61 @@ def test_planner_does_not_wait_forever_at_rest(synthetic, depth):
     assert moving.decide([0.0, 0.0, 0.0], [0.03, 0.0, 0.0]).name == "I"
     with pytest.raises(ValueError, match="stall_speed"):
         Planner(model, path, weights, depth, stall_speed=-1.0)
+
+
+def _reference_rows(states, table, pose, vel, depth, scale):
+    """Rows of the rollout service's layout, written by the brute-force reference (level by level, base P)."""
+    rows, velocities = [], [vel]
+    for _ in range(depth):
+        nxt = []
+        for v in velocities:
+            for a in range(len(table)):
+                t = ref_transition(table, a, ref_nearest(states, v, "euclidean", scale, 1))
+                rows.append(t)
+                nxt.append(tuple(t[3:]))
+        velocities = nxt
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("depth", [1, 2, 3])
+def test_given_rows_chain_to_the_same_search_as_the_library(tiny, depth):
+    from frog_planner.core.tree_search import tree_from_rows
+    states, table = tiny
+    model = TransitionModel(states, table, list("ABCDEFGHI"))
+    scale = [float(np.ptp(states[:, c])) for c in range(3)]
+    path = sinusoid_path(length=0.36, A=8.5, f=10.0, start=(0.0, 0.0), heading=0.1)
+    pose, vel, prev = (0.10, -0.03, -0.4), (0.035, -0.02, -0.3), 0.25
+    rows = _reference_rows(states, table, pose, vel, depth, scale)
+    result = search(model, path, pose, vel, depth, CostWeights(), prev,
+                    expander=lambda p, v, d: tree_from_rows(p, rows, d, 9))
+    want_seq, want_cost, leaves = ref_search(states, table, path, pose, vel, depth, "euclidean", 1, scale, prev)
+    assert result.sequence == want_seq
+    assert result.total_cost == pytest.approx(want_cost, rel=1e-9)
+    want = np.array([leaves[seq] for seq in itertools.product(range(9), repeat=depth)])
+    np.testing.assert_allclose(result.leaf_poses[:, :2], want[:, :2], atol=1e-12)
+    with pytest.raises(ValueError, match="needs"):
+        tree_from_rows(pose, rows[:-1], depth, 9)
+
+
+def test_branches_outside_a_beam_are_never_chosen(tiny):
+    from frog_planner.core.tree_search import tree_from_rows
+    states, table = tiny
+    model = TransitionModel(states, table, list("ABCDEFGHI"))
+    scale = [float(np.ptp(states[:, c])) for c in range(3)]
+    path = sinusoid_path(length=0.36, A=8.5, f=10.0, start=(0.0, 0.0), heading=0.1)
+    pose, vel, prev = (0.10, -0.03, -0.4), (0.035, -0.02, -0.3), 0.25
+    rows = _reference_rows(states, table, pose, vel, 2, scale)
+    best_first = ref_search(states, table, path, pose, vel, 2, "euclidean", 1, scale, prev)[0][0]
+    beam = [a for a in range(9) if a != best_first][:3]       # a beam without the true best
+    for a in range(9):
+        if a not in beam:
+            rows[9 + 9 * a:9 + 9 * (a + 1)] = np.nan
+    result = search(model, path, pose, vel, 2, CostWeights(), prev,
+                    expander=lambda p, v, d: tree_from_rows(p, rows, d, 9))
+    _, _, leaves = ref_search(states, table, path, pose, vel, 2, "euclidean", 1, scale, prev)
+    costs = {seq: ref_cost(path, leaf, prev) for seq, leaf in leaves.items() if seq[0] in beam}
+    assert result.sequence == min(costs, key=costs.get)
+    assert np.isinf(result.leaf_total).sum() == 81 - 27
+    rows[:] = np.nan
+    with pytest.raises(ValueError, match="no leaf"):
+        search(model, path, pose, vel, 2, CostWeights(), prev, expander=lambda p, v, d: tree_from_rows(p, rows, d, 9))

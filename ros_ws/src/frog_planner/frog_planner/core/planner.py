@@ -201,7 +201,22 @@ class Planner:
         self._progress = float(progress)
         self._previous_pose = None
 
-    def decide(self, pose, body_velocity):
+    def rank_first_actions(self, pose, body_velocity, depth=2):
+        """First primitives, best first, by the cheapest leaf each leads to under the library's predictions.
+
+        The beam of the simulator-in-the-loop mode: only the best few first primitives are
+        rolled out to depth 2. The planner's state (progress) is not changed.
+        """
+        pose = _vector(pose, "pose", "x m, y m, heading rad")
+        body_velocity = _vector(body_velocity, "body velocity", "forward m/s, lateral m/s, yaw rate rad/s")
+        now = path_cost(self.path, pose, self.weights, self._progress, self.heading_lookahead)
+        progress = max(self._progress, float(now.progress[0]))
+        result = search(self.model, self.path, pose, body_velocity, depth, self.weights, progress,
+                        self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight)
+        per_first = result.leaf_total.reshape(self.model.n_primitives, -1).min(axis=1)
+        return [int(i) for i in np.argsort(per_first, kind="stable")]
+
+    def decide(self, pose, body_velocity, expander=None):
         """Choose the primitive to execute now (Algorithm 1).
 
         Parameters
@@ -211,6 +226,9 @@ class Planner:
         body_velocity : array_like, shape (3,)
             Measured body velocity: forward m/s, lateral m/s, yaw rate rad/s
             (nav_msgs/Odometry twist, which is in the child (body) frame).
+        expander : callable, optional
+            For this decision only, instead of the planner's own (see :func:`search`): e.g.
+            the simulator's rollouts from this pose.
 
         Returns
         -------
@@ -226,7 +244,8 @@ class Planner:
         now = path_cost(self.path, pose, self.weights, self._progress, self.heading_lookahead)
         self._progress = max(self._progress, float(now.progress[0]))
         result = search(self.model, self.path, pose, body_velocity, self.depth, self.weights, self._progress,
-                        self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight, self.expander)
+                        self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight,
+                        expander or self.expander)
         goal = self.path.goal_reached(pose, self._progress, self._previous_pose)
         self._previous_pose = pose[:2].copy()
         best = result.best_leaf

@@ -134,8 +134,9 @@ class SearchResult:
 
     @property
     def leaf_total(self):
-        """Cost of every leaf: eq. 19 plus the yaw-rate term, shape (P^H,)."""
-        return self.leaf_cost.total + self.yaw_rate_cost
+        """Cost of every leaf: eq. 19 plus the yaw-rate term, shape (P^H,); inf where not predicted."""
+        total = self.leaf_cost.total + self.yaw_rate_cost
+        return np.where(np.isfinite(total), total, np.inf)
 
     @property
     def first_action(self):
@@ -173,19 +174,56 @@ def expand_tree(model, pose, body_velocity, depth, return_velocities=False):
     depth = int(depth)
     if not 1 <= depth <= MAX_DEPTH:
         raise ValueError(f"search depth {depth} is out of range; expected 1-{MAX_DEPTH}")
+    poses, first, velocities = _chain(pose, body_velocity, depth, lambda level, vel: model.lookup(vel))
+    if return_velocities:
+        return poses, first, velocities
+    return poses, first
+
+
+def _chain(pose, body_velocity, depth, transitions):
+    """Leaves, first poses and leaf velocities of a tree; ``transitions(level, velocities)`` -> (M, P, 6)."""
     poses = np.asarray(pose, dtype=float).reshape(1, 3)
     velocities = np.asarray(body_velocity, dtype=float).reshape(1, 3)
     first = None
-    for _ in range(depth):
-        trans = model.lookup(velocities)                               # (M, P, 6)
+    for level in range(depth):
+        trans = transitions(level, velocities)                         # (M, P, 6)
         poses, velocities = apply_transition(poses[:, None, :], trans)  # (M, P, 3) each, eq. 18
         poses = poses.reshape(-1, 3)
         velocities = velocities.reshape(-1, 3)
         if first is None:
             first = poses.copy()
-    if return_velocities:
-        return poses, first, velocities
-    return poses, first
+    return poses, first, velocities
+
+
+def tree_from_rows(pose, rows, depth, n_primitives):
+    """The tree of :func:`expand_tree` from given transitions instead of the library's.
+
+    Parameters
+    ----------
+    pose : array_like, shape (3,)
+        World pose the rows start from.
+    rows : array_like, shape (P + P^2 + ... + P^H, 6)
+        Level by level, parents in base-P order (each parent's P children): dx, dy, dyaw in
+        the body frame at the period's start, u, v, w at its end (the layout of the
+        simulator's ``frog/rollouts`` service and of the motion library). NaN rows (branches
+        not simulated) give NaN leaves, which :func:`search` never chooses.
+    depth : int
+    n_primitives : int
+
+    Returns
+    -------
+    leaf_poses, first_poses, leaf_velocities : numpy.ndarray
+        As :func:`expand_tree` with ``return_velocities``.
+    """
+    depth, p = int(depth), int(n_primitives)
+    rows = np.asarray(rows, dtype=float)
+    sizes = [p ** (d + 1) for d in range(depth)]
+    if rows.shape != (sum(sizes), 6):
+        raise ValueError(f"rows have shape {rows.shape}; a depth-{depth} tree of {p} primitives needs "
+                         f"({sum(sizes)}, 6)")
+    offsets = np.cumsum([0] + sizes)
+    return _chain(pose, np.zeros(3), depth,
+                  lambda level, vel: rows[offsets[level]:offsets[level + 1]].reshape(-1, p, 6))
 
 
 def extrapolate_poses(poses, body_velocities, horizon):
@@ -281,7 +319,11 @@ def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), pre
         yaw_cost = yaw_rate_weight * np.abs(leaf_velocities[:, 2] - needed)
     else:
         yaw_cost = np.zeros(len(leaves))
-    best = int(np.argmin(cost.total + yaw_cost))
+    # leaves an expander did not predict (NaN: a branch outside a beam) are never chosen
+    total = np.where(np.isfinite(cost.total + yaw_cost), cost.total + yaw_cost, np.inf)
+    if not np.any(np.isfinite(total)):
+        raise ValueError("no leaf of the search tree has a finite cost (every prediction is NaN)")
+    best = int(np.argmin(total))
     n_prim = model.n_primitives
     digits = []
     rest = best

@@ -16,6 +16,16 @@ decisions refused for a stale or missing pose (``stale_decisions``). Weights, de
 the path and ``library_file`` can be changed while running (``ros2 param set``); setting
 ``library_file`` (to a new path, or again to the same one after fixing the file) loads it
 anew, so a missing or corrupt library is fixed without a restart.
+
+``transitions`` (live) chooses the predictions the search chains: ``library`` (the paper's
+nearest library state) or ``simulator`` (the paper's future work): at each tick the node
+asks ``frog/rollouts`` (frog_sim ``rollout_node``) for the tree from the tracked pose and
+twist and the limbs' firing ages (``frog/bridge/sent``), coasted to the moment the decision
+is executed, ``decision_deadline`` periods after the tick. The decision is published then.
+A response that has not arrived by then, a refusal or a missing service makes that one
+decision a library decision on the newest pose, with a WARN and a count in diagnostics
+(``fallback_decisions``). Depth 2 expands all 81 sequences, or with ``beam_width`` k only
+the k first primitives the library ranks best.
 """
 
 from __future__ import annotations
@@ -41,6 +51,10 @@ from frog_planner.core.library_file import LibraryFormatError
 from frog_planner.core.planner import Planner
 from frog_planner.core.settings import PathSettings, PlannerSettings
 from frog_planner.core.transition_model import TransitionModel
+from frog_planner.nodes.rollout_client import RolloutClient, lead_time
+
+TRANSITIONS = ("library", "simulator")
+SIMULATOR_MAX_DEPTH = 2
 
 # The node's own settings; the planner's and the path's come from frog_planner.core.settings.
 _NODE_PARAMS = [
@@ -54,6 +68,17 @@ _NODE_PARAMS = [
     Param("autostart", True, "start following at once (else wait for ~/start)"),
     Param("feasibility_lookahead", 0.1, "the status compares the path's tightest bend this far ahead with the "
           "frog's tightest steady turn (path_too_tight)", min=0.0, max=10.0, live=True),
+    Param("transitions", "library", "predictions the search chains: library (the paper) or simulator "
+          "(rollouts of the DER from the estimated state, frog/rollouts; depth 1-2)", choices=TRANSITIONS,
+          live=True),
+    Param("rollout_service", "frog/rollouts", "the simulator's rollout service (transitions simulator)"),
+    Param("sent_topic", "frog/bridge/sent", "what the bridge fired (LimbActivation): the limbs' firing ages in "
+          "the rollouts' start state"),
+    Param("decision_deadline", 0.7, "transitions simulator: the decision is executed this many periods after "
+          "the tick (the rollouts start from the state predicted then); a later response falls back to the "
+          "library for that decision", min=0.05, max=0.95, live=True),
+    Param("beam_width", 0, "transitions simulator, depth 2: roll out only the first primitives the library "
+          "ranks best, this many; 0 = all 9", min=0, max=9, live=True),
     Param("initial_progress", 0.0, "progress along the path to start from, in [0, 1] (a restarted planner "
           "resumes where it was)", min=0.0, max=1.0),
 ]
@@ -79,6 +104,9 @@ def _check_settings(values: dict) -> str | None:
         _settings(PlannerSettings, values, _PLANNER_FIELDS)
     except ValueError as exc:
         return str(exc)
+    if values.get("transitions") == "simulator" and values.get("depth", 1) > SIMULATOR_MAX_DEPTH:
+        return (f"transitions simulator rolls out depth 1-{SIMULATOR_MAX_DEPTH}; depth is {values['depth']} "
+                f"(lower depth, or use transitions library)")
     return None
 
 
@@ -111,6 +139,17 @@ class PlannerNode(Node):
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/stop", self.on_stop)
         self.create_subscription(Empty, "frog/stop", self.on_stop_topic, qos)
+        from soft_robot_interfaces.msg import LimbActivation
+        names = {LimbActivation.LIMB_FL: "FL", LimbActivation.LIMB_FR: "FR", LimbActivation.LIMB_BL: "BL",
+                 LimbActivation.LIMB_BR: "BR"}
+        self.rollouts = RolloutClient(self, p["rollout_service"], names)
+        self.create_subscription(LimbActivation, p["sent_topic"], self.rollouts.on_sent, qos)
+        self.pending = None             # the simulator decision waiting for its deadline
+        self._deadline_timer = None
+        self.simulator_decisions = 0
+        self.fallback_decisions = 0     # simulator decisions made by the library instead
+        self.last_rollout_s = math.nan  # the rollout server's compute time of the last response
+        self._last_fallback = None
         self.model = None
         self.planner = None
         self.limits = None              # the frog's steady turning circles (feasibility), from the model
@@ -130,7 +169,8 @@ class PlannerNode(Node):
         self.diagnostics = NodeDiagnostics(self, "planner", self._diagnostics, hardware_id="planner")
         self.get_logger().info(
             f"following a {self.path.name} path of {self.path.length:.3f} m, period {self.settings.period} s, "
-            f"depth {self.settings.depth}, metric {self.settings.metric}; odometry from "
+            f"depth {self.settings.depth}, metric {self.settings.metric}, transitions {p['transitions']}; "
+            f"odometry from "
             f"{self.resolve_topic_name(p['odom_topic'])}; "
             + (f"not planning: {self.library_error}" if self.library_error
                else 'running' if self.running else 'waiting for ~/start'))
@@ -301,7 +341,9 @@ class PlannerNode(Node):
         values = {"library_file": self.cfg["library_file"], "path": self.path.name,
                   "progress": float(self.planner.progress) if self.planner is not None else 0.0,
                   "odometry_topic": self.resolve_topic_name(self.cfg["odom_topic"]),
-                  "stale_decisions": self.stale_decisions, "pose_age_s": self.pose_age()}
+                  "stale_decisions": self.stale_decisions, "pose_age_s": self.pose_age(),
+                  "transitions": self.cfg["transitions"], "simulator_decisions": self.simulator_decisions,
+                  "fallback_decisions": self.fallback_decisions, "last_rollout_s": self.last_rollout_s}
         return level, message, values
 
     def _publish(self, primitive_id: int, name: str, state: int, message: str, decision=None, now=None) -> None:
@@ -357,7 +399,12 @@ class PlannerNode(Node):
         S = self._Status
         if self._path_unstamped:
             self.publish_path()
+        if self.pending is not None:            # a deadline the clock skipped past: close it first
+            self.finish_simulator_decision()
         blocked = self._state()
+        if blocked is None and self.cfg["transitions"] == "simulator":
+            self.start_simulator_decision()
+            return
         if blocked is None:
             pose, velocity = self.odom
             try:
@@ -370,22 +417,102 @@ class PlannerNode(Node):
                 now = self.get_clock().now()
                 blocked = self._state(now)
         if blocked is None:
-            if d.goal_reached:
-                self.goal_reached = True
-                message = (f"goal reached (progress {d.progress:.3f}, {d.distance_to_path * 100:.2f} cm "
-                           f"from the path)")
-                self._log_state(S.STATE_GOAL_REACHED, message)
-                self._publish(8, "I", S.STATE_GOAL_REACHED, message, now=now)
-                return
-            self._log_state(S.STATE_FOLLOWING, f"following the {self.path.name} path")
-            self.get_logger().debug(f"primitive {d.name}: cost {d.total_cost:.2f}, progress {d.progress:.3f}")
-            self._publish(d.primitive_id, d.name, S.STATE_FOLLOWING, "following", d, now=now)
+            self._act(d, now, "following")
             return
+        self._refuse(blocked)
+
+    def _act(self, d, now, note: str) -> None:
+        """Publish decision ``d`` (I when it reached the goal)."""
+        S = self._Status
+        if d.goal_reached:
+            self.goal_reached = True
+            message = (f"goal reached (progress {d.progress:.3f}, {d.distance_to_path * 100:.2f} cm "
+                       f"from the path)")
+            self._log_state(S.STATE_GOAL_REACHED, message)
+            self._publish(8, "I", S.STATE_GOAL_REACHED, message, now=now)
+            return
+        self._log_state(S.STATE_FOLLOWING, f"following the {self.path.name} path")
+        self.get_logger().debug(f"primitive {d.name}: cost {d.total_cost:.2f}, progress {d.progress:.3f}")
+        self._publish(d.primitive_id, d.name, S.STATE_FOLLOWING, note, d, now=now)
+
+    def _refuse(self, blocked) -> None:
         state, reason = blocked
-        if state == S.STATE_WAITING:             # only odometry problems wait
+        if state == self._Status.STATE_WAITING:  # only odometry problems wait
             self.stale_decisions += 1           # a decision refused for a stale or missing pose
         self._log_state(state, reason)
         self._publish(8, "I", state, reason)
+
+    # -- transitions: simulator ----------------------------------------------------------------
+    def start_simulator_decision(self) -> None:
+        """Ask for the rollouts of this tick's state; the decision is made at the deadline."""
+        from rclpy.duration import Duration
+        delay = self.cfg["decision_deadline"] * self.settings.period
+        pose, velocity = self.odom
+        depth = self.settings.depth
+        firsts = ()
+        if depth == 2 and 0 < self.cfg["beam_width"] < self.model.n_primitives:
+            ranked = self.planner.rank_first_actions(pose, velocity)
+            firsts = [self.model.primitive_names[i] for i in ranked[:self.cfg["beam_width"]]]
+        execute_at = self.get_clock().now() + Duration(seconds=delay)
+        lead = lead_time(execute_at, self.odom_stamp)
+        future, reason = self.rollouts.request(pose, velocity, self.odom_stamp, self.settings.period, depth, lead,
+                                               firsts)
+        self.pending = {"future": future, "reason": reason, "pose": pose, "velocity": velocity,
+                        "stamp": self.odom_stamp, "depth": depth, "lead": lead}
+        self._deadline_timer = self.create_timer(delay, self.finish_simulator_decision)
+
+    def finish_simulator_decision(self) -> None:
+        """At the deadline: decide on the rollouts if they came, else on the library (WARN, counted)."""
+        S = self._Status
+        if self._deadline_timer is not None:
+            self.destroy_timer(self._deadline_timer)
+            self._deadline_timer = None
+        pend, self.pending = self.pending, None
+        if pend is None:
+            return
+        now = self.get_clock().now()
+        expander, reason, future = None, pend["reason"], pend["future"]
+        if future is not None:
+            if future.done():
+                try:
+                    response = future.result()
+                except Exception as exc:           # noqa: BLE001 - a failed call is a fallback, not a crash
+                    reason = f"rollout call failed: {exc}"
+                else:
+                    self.last_rollout_s = float(response.compute_time)
+                    expander, reason = RolloutClient.expander(response, self.model.primitive_names, pend["depth"])
+            else:
+                reason = (f"rollouts missed the deadline ({self.cfg['decision_deadline']:.2f} periods = "
+                          f"{self.cfg['decision_deadline'] * self.settings.period:.2f} s)")
+                self.rollouts.cancel(future)
+        blocked = self._state(now)
+        bound = self.cfg["stale_periods"] * self.settings.period
+        if blocked is None and (now - pend["stamp"]).nanoseconds * 1e-9 > bound:
+            blocked = S.STATE_WAITING, (f"the rollouts' pose is stale at the deadline "
+                                        f"({(now - pend['stamp']).nanoseconds * 1e-9:.2f} s; bound {bound:.2f} s)")
+        if blocked is not None:
+            self._refuse(blocked)
+            return
+        try:
+            if expander is not None:
+                d = self.planner.decide(pend["pose"], pend["velocity"], expander)
+                self.simulator_decisions += 1
+                note = f"following (simulator, depth {pend['depth']}, lead {pend['lead']:.4f} s)"
+            else:
+                self.fallback_decisions += 1
+                if reason != self._last_fallback:
+                    self.get_logger().warning(f"library decision instead of the simulator's: {reason} "
+                                              f"({self.fallback_decisions} so far)")
+                self._last_fallback = reason
+                pose, velocity = self.odom            # the newest pose: the library needs no lead
+                d = self.planner.decide(pose, velocity)
+                note = f"following (library fallback: {reason})"
+        except ValueError as exc:
+            self._refuse((S.STATE_ERROR, f"planner rejected the state: {exc}"))
+            return
+        if expander is not None:
+            self._last_fallback = None
+        self._act(d, now, note)
 
 
 def main(args=None) -> int:

@@ -7,7 +7,9 @@ primitive sequence of depth 1 or 2 (9 or 81; shared prefixes are simulated once)
 layout of the motion library: ``planner_node`` with ``transitions:=simulator`` chains them
 by eq. 18 exactly as it chains library transitions. The model is compiled and warmed up at
 start-up (``ready`` in the log and on ``diagnostics``), so the first request is as fast as
-the others.
+the others. ``lead`` first coasts the estimated state (nothing fired, limbs relaxing) for the
+time until the decision will be executed, so the tree starts where the robot will be when
+it fires; ``first_primitives`` restricts depth 2 to a beam (the other rows are NaN).
 
     ros2 run frog_sim rollout_node --ros-args -p threads:=2
     ros2 service call /frog/rollouts soft_robot_interfaces/srv/Rollouts "{period: 1.43, depth: 1}"
@@ -41,30 +43,27 @@ PARAMS = [
 ]
 
 
-def tree_transitions(result, start_pose, depth: int, n_primitives: int) -> np.ndarray:
+def tree_transitions(result, start_pose, depth: int, names) -> np.ndarray:
     """Rows of 6 level by level (P^d rows at level d, base-P order), each in its own period's start frame.
 
-    ``result.transitions`` holds every period end relative to the sequence's start; the
-    planner chains one period at a time (eq. 18), so level d > 1 is re-expressed from the
-    end of period d - 1 (its pose in ``result.pose``).
+    The planner chains one period at a time (eq. 18): a row of level d is the end of period
+    d (``result.ends`` of the prefix) seen from the end of period d - 1, level 1 from
+    ``start_pose`` (the request's pose, before any lead). Prefixes that were not simulated
+    (outside a beam, or not converged) give NaN rows.
     """
-    p = n_primitives
-    poses = result.pose.reshape((p,) * depth + (depth, 3))
-    twists = result.transitions[..., 3:].reshape((p,) * depth + (depth, 3))
-    start = None
-    levels = []
-    for d in range(depth):
-        idx = (slice(None),) * (d + 1) + (0,) * (depth - d - 1) + (d,)   # the first child's copy
-        end_pose, end_twist = poses[idx].reshape(-1, 3), twists[idx].reshape(-1, 3)
-        if start is None:
-            base = np.broadcast_to(np.asarray(start_pose, dtype=float), end_pose.shape)
-        else:
-            base = np.repeat(start, p, axis=0)
-        c, s = np.cos(base[:, 2]), np.sin(base[:, 2])
-        dx, dy = end_pose[:, 0] - base[:, 0], end_pose[:, 1] - base[:, 1]
-        levels.append(np.column_stack([c * dx + s * dy, -s * dx + c * dy, end_pose[:, 2] - base[:, 2], end_twist]))
-        start = end_pose
-    return np.concatenate(levels)
+    rows = []
+    for d in range(1, depth + 1):
+        for prefix in itertools.product(names, repeat=d):
+            end = result.ends.get(prefix)
+            parent = result.ends.get(prefix[:-1]) if d > 1 else None
+            base = np.asarray(start_pose, dtype=float) if d == 1 else (parent.pose if parent else None)
+            if end is None or base is None:
+                rows.append(np.full(6, np.nan))
+                continue
+            c, s = math.cos(base[2]), math.sin(base[2])
+            dx, dy = end.pose[0] - base[0], end.pose[1] - base[1]
+            rows.append(np.array([c * dx + s * dy, -s * dx + c * dy, end.pose[2] - base[2], *end.twist]))
+    return np.array(rows)
 
 
 class RolloutNode(Node):
@@ -124,18 +123,31 @@ class RolloutNode(Node):
             if not (math.isfinite(ago) and ago >= 0.0):
                 return self._refuse(response, f"fired_ago of {limb} = {ago!r} s must be finite and >= 0")
             fired[limb] = -float(ago)
+        if not (math.isfinite(request.lead) and 0.0 <= request.lead <= 5.0):
+            return self._refuse(response, f"lead {request.lead!r} s must be in [0, 5]")
+        firsts = list(request.first_primitives)
+        unknown = [n for n in firsts if n not in PRIMITIVE_NAMES]
+        if unknown:
+            return self._refuse(response, f"first_primitives: unknown {unknown}; expected some of "
+                                          f"{', '.join(PRIMITIVE_NAMES)}")
         pose = (request.pose.x, request.pose.y, request.pose.theta)
         twist = (request.twist.linear.x, request.twist.linear.y, request.twist.angular.z)
         t0 = time.monotonic()
         try:
             start = self.rollouts.estimated_start(pose, twist, fired, now=0.0)
-            seqs = list(itertools.product(PRIMITIVE_NAMES, repeat=request.depth))
+            if request.lead > 0:     # where the robot will be when the decision fires
+                start = self.rollouts.rollout_batch(start, [("I",)], period=request.lead).ends.get(("I",))
+                if start is None:
+                    return self._refuse(response, f"the {request.lead:.3f} s coast before the decision did not "
+                                                  f"converge")
+            seqs = [s for s in itertools.product(PRIMITIVE_NAMES, repeat=request.depth)
+                    if not firsts or s[0] in firsts]
             result = self.rollouts.rollout_batch(start, seqs, period=request.period)
         except ValueError as exc:
             return self._refuse(response, str(exc))
-        rows = tree_transitions(result, pose, request.depth, len(PRIMITIVE_NAMES))
+        rows = tree_transitions(result, pose, request.depth, PRIMITIVE_NAMES)
         self.last_compute = time.monotonic() - t0
-        if not np.all(np.isfinite(rows)):
+        if not np.all(result.converged):
             return self._refuse(response, f"{int(np.sum(~result.converged))} of {len(seqs)} rollouts did "
                                           f"not converge")
         response.success = True

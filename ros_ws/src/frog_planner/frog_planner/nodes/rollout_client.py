@@ -1,0 +1,85 @@
+"""planner_node's side of ``transitions: simulator``: asking ``frog/rollouts`` for a decision's tree.
+
+What the robot can know goes into the request (DESIGN.md, "Planning modes"): the tracked
+pose and body twist, and how long ago each limb was fired, from what the bridge wrote
+(``frog/bridge/sent``, LimbActivation stamped at the write). The request's ``lead`` coasts
+that state from the pose's capture stamp to the moment the decision will be executed, so
+the tree starts where the robot will be when it fires.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from geometry_msgs.msg import Pose2D, Twist
+
+from frog_planner.core.tree_search import tree_from_rows
+
+#: A limb fired longer ago than this has relaxed (the actuation model's recovery is ~1-2 s).
+FIRING_MEMORY_S = 10.0
+
+
+class RolloutClient:
+    """Requests of one planner: limb firing record, request building, response checking."""
+
+    def __init__(self, node, service: str, limb_names: dict):
+        from soft_robot_interfaces.srv import Rollouts
+        self._Request = Rollouts.Request
+        self.node = node
+        self.client = node.create_client(Rollouts, service)
+        self.limb_names = limb_names       # LimbActivation id -> name ("FL", ...)
+        self.fired = {}                    # limb name -> node-clock Time of its last pulse start
+
+    def on_sent(self, msg) -> None:
+        """Record the limbs the bridge fired (``frog/bridge/sent``)."""
+        from rclpy.time import Time
+        stamp = Time.from_msg(msg.header.stamp, clock_type=self.node.get_clock().clock_type)
+        for limb in msg.limbs:
+            name = self.limb_names.get(int(limb))
+            if name is not None and (name not in self.fired or stamp > self.fired[name]):
+                self.fired[name] = stamp
+
+    def request(self, pose, twist, at, period: float, depth: int, lead: float, first_primitives=()):
+        """Send the request for a state valid at node-clock time ``at``; returns the future, or a reason."""
+        if not self.client.service_is_ready():
+            return None, f"rollout service {self.client.srv_name} is not available"
+        req = self._Request(pose=Pose2D(x=float(pose[0]), y=float(pose[1]), theta=float(pose[2])),
+                            period=float(period), depth=int(depth), lead=float(max(lead, 0.0)),
+                            first_primitives=list(first_primitives))
+        t = Twist()
+        t.linear.x, t.linear.y, t.angular.z = (float(v) for v in twist)
+        req.twist = t
+        for name, stamp in self.fired.items():
+            ago = (at - stamp).nanoseconds * 1e-9
+            if -0.05 <= ago < FIRING_MEMORY_S:           # a pulse stamped just after the pose: now
+                req.fired_limbs.append(name)
+                req.fired_ago.append(max(ago, 0.0))
+        return self.client.call_async(req), None
+
+    def cancel(self, future) -> None:
+        if future is not None and not future.done():
+            self.client.remove_pending_request(future)
+
+    @staticmethod
+    def expander(response, names, depth: int):
+        """The search's expander from a successful response, or (None, reason)."""
+        if not response.success:
+            return None, f"rollouts refused: {response.message}"
+        if list(response.primitive_names) != list(names):
+            return None, (f"the simulator's primitives {list(response.primitive_names)} are not the "
+                          f"library's {list(names)}")
+        rows = np.asarray(response.transitions, dtype=float).reshape(-1, 6)
+        if not np.any(np.all(np.isfinite(rows[-len(names) ** depth:]), axis=1)):
+            return None, "the rollouts returned no finite leaf"
+        try:
+            tree_from_rows(np.zeros(3), rows, depth, len(names))    # the shape check
+        except ValueError as exc:
+            return None, str(exc)
+        return (lambda pose, velocity, d: tree_from_rows(pose, rows, d, len(names))), None
+
+
+def lead_time(execute_at, pose_stamp) -> float:
+    """Seconds from the pose's capture stamp to the decision's execution (>= 0)."""
+    lead = (execute_at - pose_stamp).nanoseconds * 1e-9
+    return lead if math.isfinite(lead) and lead > 0 else 0.0
