@@ -66,7 +66,7 @@ def real_graph(args, name: str, out: Path, path_settings, settings):
     """The real robot's processes: the graph file's real mode with this run's devices and files."""
     from frog_planner.core.settings import as_dict
 
-    from frog_twin.twin import GRAPH_FILE
+    from frog_twin.twin import GRAPH_FILE, transitions_choice
     camera_info = str(args.camera_info) if getattr(args, "camera_info", None) else None
     tracker = {"camera_info_file": camera_info,
                "tank_calibration_file": str(args.tank_calibration) if args.tank_calibration else None}
@@ -78,9 +78,11 @@ def real_graph(args, name: str, out: Path, path_settings, settings):
         "tracker_node": tracker,
         "image_preview": {"rate_hz": args.video_rate},
         "bridge_node": {"port": str(args.robot_port or "/dev/ttyACM0")},
-        "planner_node": {"library_file": str(args.library), **as_dict(settings), **as_dict(path_settings)},
+        "planner_node": {"library_file": str(args.library), **as_dict(settings), **as_dict(path_settings),
+                         **transitions_choice(args)[0]},
     }
-    return load_graph(getattr(args, "graph_file", None) or GRAPH_FILE, "real", overrides)
+    return load_graph(getattr(args, "graph_file", None) or GRAPH_FILE, "real", overrides,
+                      exclude=transitions_choice(args)[1])
 
 
 def reference_sim_node(args, pose):

@@ -230,6 +230,13 @@ PLANNER_TOPICS = ("/frog/primitive", "/frog/planner/status")
 SERIAL_NODES = ("robot_emulator", "bridge_node")
 
 
+def transitions_choice(args) -> tuple[dict, tuple]:
+    """planner_node's ``transitions`` override and the nodes to leave out: rollout_node runs only
+    when the planner asks the simulator (``--transitions simulator``)."""
+    transitions = getattr(args, "transitions", "library") or "library"
+    return {"transitions": transitions}, (() if transitions == "simulator" else ("rollout_node",))
+
+
 def twin_graph(args, name: str, out: Path, path_settings, settings, start_pose, graph_file=GRAPH_FILE):
     """The twin's processes for one run: the graph file's sim mode with this run's values."""
     x0, y0, h0 = start_pose
@@ -243,7 +250,8 @@ def twin_graph(args, name: str, out: Path, path_settings, settings, start_pose, 
                      "limb_strength_sd": args.limb_strength_sd, "kick_strength_sd": args.kick_strength_sd,
                      "yaw_disturbance_sd": args.yaw_disturbance_sd, "yaw_disturbance_tau_s": args.yaw_disturbance_tau,
                      "seed": args.seed},
-        "planner_node": {"library_file": str(args.library), **as_dict(settings), **as_dict(path_settings)},
+        "planner_node": {"library_file": str(args.library), **as_dict(settings), **as_dict(path_settings),
+                         **transitions_choice(args)[0]},
     }
     if not args.no_vision:
         overrides["camera_sim"] = {"seed": args.seed, "tag_yaw": tag_yaw}
@@ -256,7 +264,8 @@ def twin_graph(args, name: str, out: Path, path_settings, settings, start_pose, 
         overrides["robot_emulator"] = {"link_path": str(out / "robot_tty"), "seed": args.seed,
                                        "command_log": str(out / "robot_commands.csv")}
         overrides["bridge_node"] = {"port": str(out / "robot_tty")}
-    exclude = (*(VISION_NODES if args.no_vision else ()), *(SERIAL_NODES if args.direct else ()))
+    exclude = (*(VISION_NODES if args.no_vision else ()), *(SERIAL_NODES if args.direct else ()),
+               *transitions_choice(args)[1])
     for node, values in getattr(args, "node_params", {}).items():     # --node-param, last
         overrides.setdefault(node, {}).update(values)
     return load_graph(graph_file, "sim", overrides, exclude=exclude)
@@ -591,6 +600,21 @@ def main(argv=None) -> int:
     ap.add_argument("--real-time-factor", type=float, default=1.0,
                     help="simulated seconds per wall second (all nodes follow /clock)")
     ap.add_argument("--seed", type=int, default=1, help="seed of every random element (noise, BLE jitter, limbs)")
+    cg = ap.add_argument_group("planner comparison (issue 19)")
+    cg.add_argument("--planner-compare", action="store_true",
+                    help="run the paper's planner, the project's, and the simulator in the loop at depth 1 and 2 "
+                         "on each path with --seeds seeds; one table (compare.md) and one figure per path")
+    cg.add_argument("--compare-planners", default="paper,project,sim-d1,sim-d2",
+                    help="planners compared (comma-separated of paper, project, sim-d1, sim-d2)")
+    cg.add_argument("--compare-beam", type=int, default=3, choices=range(0, 10), metavar="K",
+                    help="sim-d2 rolls out the K first primitives the library ranks best (0 = all 9; default 3)")
+    cg.add_argument("--compare-paths", default="all", help="the paper's paths compared (comma-separated; all)")
+    cg.add_argument("--compare-runs", type=Path, default=None, metavar="DIR",
+                    help="also each hardware run's reference path in DIR (<run>.csv + <run>_path.csv), from its "
+                         "logged start pose at its fitted period")
+    ap.add_argument("--transitions", choices=("library", "simulator"), default="library",
+                    help="the planner's predictions: the motion library (the paper) or the DER simulator itself "
+                         "(rollout_node; depth 1-2; --node-param planner_node:decision_deadline=0.7, beam_width=3)")
     ap.add_argument("--duration", type=float, default=None,
                     help="simulated seconds at most per path (default 150; replays: twice the real run + 15)")
     ap.add_argument("--no-vision", action="store_true", help="ground-truth odometry instead of camera + tracker")
@@ -693,7 +717,7 @@ def main(argv=None) -> int:
         if args.path not in (*PATH_NAMES, "all"):
             ap.error(f"--path {args.path!r}: expected one of {', '.join(PATH_NAMES)}, all (or --replay RUN.csv)")
         if (args.paper_cost or args.tag_offset_deg is not None or args.aligned_tag
-                or (args.seeds != 1 and not args.fault_campaign)):
+                or (args.seeds != 1 and not (args.fault_campaign or args.planner_compare))):
             ap.error("--paper-cost, --tag-offset-deg and --aligned-tag go with --replay / --replay-all, --seeds "
                      "also with --fault-campaign")
     if not args.stuck_timeout > 0:
@@ -744,6 +768,13 @@ def main(argv=None) -> int:
     if args.fault_campaign:
         from frog_twin.campaign import main_campaign
         return main_campaign(args, root)
+    if args.planner_compare:
+        from frog_twin.planner_compare import PLANNERS, main_compare
+        bad = [k for k in args.compare_planners.split(",") if k.strip() not in PLANNERS]
+        if bad or (args.compare_runs is not None and not args.compare_runs.is_dir()):
+            ap.error(f"--compare-planners {', '.join(bad)}: expected of {', '.join(PLANNERS)}" if bad
+                     else f"--compare-runs {args.compare_runs} is not a folder")
+        return main_compare(args, root)
     out = args.out or root / "runs" / time.strftime("main_%Y%m%d_%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     names = PATH_NAMES if args.path == "all" else (args.path,)

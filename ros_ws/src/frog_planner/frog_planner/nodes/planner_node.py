@@ -515,6 +515,13 @@ class PlannerNode(Node):
         self._act(d, now, note)
 
 
+    def destroy_node(self):
+        if self.simulator_decisions or self.fallback_decisions:     # the run's count, for reports
+            self.get_logger().info(f"decisions: {self.simulator_decisions} simulator, {self.fallback_decisions} "
+                                   f"library fallbacks")
+        return super().destroy_node()
+
+
 def main(args=None) -> int:
     return run_node(PlannerNode, args)
 
