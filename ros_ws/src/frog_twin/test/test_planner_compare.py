@@ -1,0 +1,46 @@
+"""frog-twin --planner-compare's table and planner settings, on made-up results (no ROS)."""
+
+import re
+
+import numpy as np
+import pytest
+
+from frog_planner.core.settings import PlannerSettings
+from frog_twin.planner_compare import compare_table, planner_settings
+
+
+def _result(path, planner, seed, mean, finished=True, sim=0, fallbacks=0):
+    return {"path": path, "planner": planner, "seed": seed, "mean_distance_m": mean, "finished": finished,
+            "simulator_decisions": sim, "fallbacks": fallbacks, "floor_m": 0.001}
+
+
+def test_table_sums_the_seed_means_and_judges_the_targets():
+    rng = np.random.default_rng(3)
+    means = {(p, k): rng.uniform(0.005, 0.05, 2) for p in ("line", "sine") for k in ("paper", "project", "sim-d1")}
+    means["sine", "sim-d1"][:] = means["sine", "paper"] + 0.01          # worse than the paper on the sine
+    results = [_result(p, k, s + 1, float(v[s]), sim=5 if k == "sim-d1" else 0, fallbacks=1 if k == "sim-d1" else 0)
+               for (p, k), v in means.items() for s in range(2)]
+    text = compare_table(results)
+    sums = {k: sum(means[p, k].mean() for p in ("line", "sine")) for k in ("paper", "project", "sim-d1")}
+    row = next(line for line in text.splitlines() if line.startswith("| **sum**"))
+    got = [float(x) for x in re.findall(r"\*\*([\d.]+)\*\*", row)]
+    assert got == pytest.approx([sums[k] * 100 for k in ("paper", "project", "sim-d1")], abs=0.006)
+    best = min(("project", "sim-d1"), key=sums.get)
+    ratio = sums[best] / sums["paper"]
+    assert f"Best mode {best}" in text and f"{ratio:.2f} x the paper" in text
+    assert ("met" if ratio <= 0.7 else "NOT met") in text
+    worse = [p for p in ("line", "sine") if means[p, best].mean() > means[p, "paper"].mean()]
+    assert f"worse than the paper planner: {', '.join(worse) if worse else 'none'}" in text
+    assert "sim-d1 20 / 4" in text           # 2 paths x 2 seeds x (5 decisions, 1 fallback)
+    assert "(2/2)" in text
+
+
+def test_compared_planners_share_the_period_and_differ_as_specified():
+    base = PlannerSettings(depth=1)
+    paper, t = planner_settings("paper", base, 1.43)
+    assert t == "library" and paper.period == 1.43 and paper.metric == "relative" and paper.heading_lookahead == 0
+    project, t = planner_settings("project", base, 1.43)
+    assert t == "library" and project.heading_lookahead == base.heading_lookahead and project.period == 1.43
+    for kind, depth in (("sim-d1", 1), ("sim-d2", 2)):
+        s, t = planner_settings(kind, base, 1.43)
+        assert t == "simulator" and s.depth == depth and s.w_distance == base.w_distance
