@@ -30,6 +30,7 @@ import math
 import os
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -117,6 +118,33 @@ def describe(values, unit, digits=3):
             f'max {v.max():.{digits}f}')
 
 
+#: first primitives of the beam timed beside the full depth-2 tree (planner_node beam_width)
+BEAM = 3
+
+
+def library_latency(library_file, period, repeats, starts):
+    """The library mode's decision time (Planner.decide, default cost), beside the rollouts."""
+    from frog_planner.core.paths import sinusoid_path
+    from frog_planner.core.planner import Planner
+    from frog_planner.core.transition_model import TransitionModel
+    if not library_file.is_file():
+        print(f'  library mode: {library_file} not found (frog-twin generates it on first use); not timed')
+        return
+    model = TransitionModel.load(str(library_file), period=period)
+    for depth in (1, 2):
+        planner = Planner(model, sinusoid_path(), depth=depth)
+        cpu, wall = [], []
+        for _ in range(repeats):
+            for start in starts:
+                planner.reset()
+                _, c, w = timed(lambda: planner.decide(start.pose, start.twist if start.twist is not None
+                                                       else np.zeros(3)))
+                cpu.append(c)
+                wall.append(w)
+        print(f'  library mode depth {depth} ({library_file.name}): {statistics.median(wall) * 1e3:.2f} ms wall, '
+              f'{statistics.median(cpu) * 1e3:.2f} ms CPU per decision (median)')
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--repeats', type=int, default=5, help='repeats of every timing (medians reported)')
@@ -126,6 +154,8 @@ def main(argv=None):
     ap.add_argument('--states', type=int, default=3, help='start states of the timed decisions')
     ap.add_argument('--compare-states', type=int, default=6, help='running-simulation states of each kind '
                     'for the estimated-vs-exact start comparison')
+    ap.add_argument('--library', type=Path, default=Path(__file__).resolve().parents[1] / 'runs' / 'library' /
+                    'frog_default.npz', help='motion library of the library-mode timing')
     args = ap.parse_args(argv)
     if args.repeats < 1 or args.states < 1 or args.compare_states < 1 or not 0 < args.period <= 5:
         ap.error('--repeats, --states, --compare-states must be >= 1 and --period in (0, 5]')
@@ -141,7 +171,8 @@ def main(argv=None):
     prims = [(p,) for p in PRIMITIVE_NAMES]
     pairs = [(a, b) for a in PRIMITIVE_NAMES for b in PRIMITIVE_NAMES]
 
-    base_cpu, base_wall, d1_cpu, d1_wall, d2_cpu, d2_wall = [], [], [], [], [], []
+    beam = [(a, b) for a in PRIMITIVE_NAMES[:BEAM] for b in PRIMITIVE_NAMES]
+    base_cpu, base_wall, d1_cpu, d1_wall, d2_cpu, d2_wall, bm_cpu, bm_wall = [], [], [], [], [], [], [], []
     base_rows, batch_rows, stats = None, None, None
     for _ in range(args.repeats):
         rows, cpu, wall = [], 0.0, 0.0
@@ -164,6 +195,9 @@ def main(argv=None):
             d2_cpu.append(c)
             d2_wall.append(w)
             stats = res.stats
+            _, c, w = timed(lambda: ro.rollout_batch(start, beam, period=period))
+            bm_cpu.append(c)
+            bm_wall.append(w)
         batch_rows = np.array(r1)
     med = statistics.median
     b_cpu, b_wall = med(base_cpu), med(base_wall)
@@ -194,12 +228,14 @@ def main(argv=None):
           f'  (ratio to baseline {rate["d2 cpu"] / rate["base cpu"]:.2f}x CPU, '
           f'{rate["d2 wall"] / rate["base wall"]:.2f}x wall)')
     print(f'  decision wall time (budget {BUDGET_SHARE:g} x {period:g} s = {budget:.2f} s), median [min-max]:')
-    for name, wall, cpu, n in (('depth 1', d1_wall, d1_cpu, len(prims)), ('depth 2', d2_wall, d2_cpu, n2)):
+    for name, wall, cpu, n in (('depth 1', d1_wall, d1_cpu, len(prims)), ('depth 2', d2_wall, d2_cpu, n2),
+                               (f'depth 2, beam {BEAM}', bm_wall, bm_cpu, BEAM + len(beam))):
         verdict = 'within' if med(wall) <= budget else 'OVER'
         cores = med(c / w for c, w in zip(cpu, wall))
         print(f'    {name}: {med(wall):.3f} s wall [{min(wall):.3f}-{max(wall):.3f}], {med(cpu):.3f} s CPU '
               f'({cores:.2f} cores busy): {verdict} budget; baseline would take {n * b_wall:.2f} s wall '
               f'({n * b_cpu:.2f} s CPU) on one core')
+    library_latency(args.library, period, args.repeats, starts)
     pos, hd = errors(batch_rows, base_rows)
     du = np.abs(batch_rows - base_rows)
     print(f'  rollouts vs baseline from the same starts (step plan + tolerance), {pos.size} one-period rollouts: '

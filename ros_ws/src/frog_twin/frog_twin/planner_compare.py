@@ -116,7 +116,8 @@ def _cases(args):
     from frog_twin.twin import PATH_NAMES, placed_path_settings
     args.hardware_duration = {}
     cases = [(name, placed_path_settings(args.path_settings, name), None, args.settings.period)
-             for name in (PATH_NAMES if args.compare_paths in (None, "all") else args.compare_paths.split(","))]
+             for name in (PATH_NAMES if args.compare_paths in (None, "all") else
+                          () if args.compare_paths == "none" else args.compare_paths.split(","))]
     if args.compare_runs is not None:
         folder = args.out_folder / "paths"
         folder.mkdir(parents=True, exist_ok=True)

@@ -608,7 +608,7 @@ def main(argv=None) -> int:
                     help="planners compared (comma-separated of paper, project, sim-d1, sim-d2)")
     cg.add_argument("--compare-beam", type=int, default=3, choices=range(0, 10), metavar="K",
                     help="sim-d2 rolls out the K first primitives the library ranks best (0 = all 9; default 3)")
-    cg.add_argument("--compare-paths", default="all", help="the paper's paths compared (comma-separated; all)")
+    cg.add_argument("--compare-paths", default="all", help="the paper's paths compared (comma-separated; all; none: only --compare-runs)")
     cg.add_argument("--compare-runs", type=Path, default=None, metavar="DIR",
                     help="also each hardware run's reference path in DIR (<run>.csv + <run>_path.csv), from its "
                          "logged start pose at its fitted period")
@@ -771,6 +771,9 @@ def main(argv=None) -> int:
     if args.planner_compare:
         from frog_twin.planner_compare import PLANNERS, main_compare
         bad = [k for k in args.compare_planners.split(",") if k.strip() not in PLANNERS]
+        bad_paths = [p for p in args.compare_paths.split(",") if p not in (*PATH_NAMES, "all", "none")]
+        if bad_paths:
+            ap.error(f"--compare-paths {', '.join(bad_paths)}: expected of {', '.join(PATH_NAMES)}, all, none")
         if bad or (args.compare_runs is not None and not args.compare_runs.is_dir()):
             ap.error(f"--compare-planners {', '.join(bad)}: expected of {', '.join(PLANNERS)}" if bad
                      else f"--compare-runs {args.compare_runs} is not a folder")
