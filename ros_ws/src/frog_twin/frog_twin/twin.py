@@ -608,7 +608,8 @@ def main(argv=None) -> int:
                     help="planners compared (comma-separated of paper, project, sim-d1, sim-d2)")
     cg.add_argument("--compare-beam", type=int, default=3, choices=range(0, 10), metavar="K",
                     help="sim-d2 rolls out the K first primitives the library ranks best (0 = all 9; default 3)")
-    cg.add_argument("--compare-paths", default="all", help="the paper's paths compared (comma-separated; all; none: only --compare-runs)")
+    cg.add_argument("--compare-paths", default="all",
+                    help="the paper's paths compared (comma-separated; all; none: only --compare-runs)")
     cg.add_argument("--compare-runs", type=Path, default=None, metavar="DIR",
                     help="also each hardware run's reference path in DIR (<run>.csv + <run>_path.csv), from its "
                          "logged start pose at its fitted period")

@@ -7,6 +7,7 @@ raises :class:`ConfigurationError` for a value it cannot work with, and its ``ma
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 
@@ -26,17 +27,54 @@ class _StopRequest:
     message being converted) and surface as an unrelated RuntimeError; a flag cannot. While
     the node is being constructed (loading meshes, compiling kernels: up to a minute)
     nothing reads the flag, so until :attr:`starting` is cleared a signal also raises
-    :class:`KeyboardInterrupt`, which ends the start-up at once.
+    :class:`KeyboardInterrupt`, which ends the start-up at once. Raised inside a callback
+    from C (llvmlite's object cache while numba compiles) the exception is printed and
+    dropped, so the raise is repeated every :attr:`REPEAT_S` (SIGALRM) until the start-up
+    has ended; after :attr:`MAX_DROPPED` dropped raises the process exits at once (exit
+    code 0: nothing was running yet).
     """
 
-    def __init__(self):
+    REPEAT_S = 0.2
+    MAX_DROPPED = 5
+
+    def __init__(self, name: str = "node"):
         self.signal = None
         self.starting = True
+        self.name = name
+        self.dropped = 0
+        self._hook = None
 
     def __call__(self, signum, frame):
-        self.signal = signum
-        if self.starting:
+        if signum != getattr(signal, "SIGALRM", None):
+            self.signal = signum
+        if self.starting and self.signal is not None:
+            if hasattr(signal, "setitimer"):
+                signal.signal(signal.SIGALRM, self)
+                signal.setitimer(signal.ITIMER_REAL, self.REPEAT_S, self.REPEAT_S)
+            if self._hook is None:
+                self._hook = sys.unraisablehook
+                sys.unraisablehook = self._unraisable
             raise KeyboardInterrupt
+
+    def _unraisable(self, info) -> None:
+        """A KeyboardInterrupt that a callback from C dropped: count it; give up waiting after a few."""
+        self._hook(info)
+        if self.starting and isinstance(info.exc_value, KeyboardInterrupt):
+            self.dropped += 1
+            if self.dropped >= self.MAX_DROPPED:
+                print(f"[{self.name}] stopped by signal during start-up", file=sys.stderr, flush=True)
+                os._exit(0)
+
+    def started(self) -> None:
+        """The node exists: the spin loop reads the flag from now on."""
+        self.starting = False
+        self.disarm()
+
+    def disarm(self) -> None:
+        if hasattr(signal, "setitimer"):
+            signal.setitimer(signal.ITIMER_REAL, 0)
+        if self._hook is not None:
+            sys.unraisablehook, self._hook = self._hook, None
 
 
 def _name(node_class, args=None) -> str:
@@ -73,7 +111,7 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
     (optional) makes the executor to spin with after ``rclpy.init`` (a class or factory,
     e.g. ``MultiThreadedExecutor`` for a node that serves requests while a long solve runs).
     """
-    stop = _StopRequest()
+    stop = _StopRequest(_name(node_class, args))
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -83,7 +121,7 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
         if stop.signal is not None:      # a signal before the handler could raise
             raise KeyboardInterrupt
         node = node_class()
-        stop.starting = False
+        stop.started()
         for name, hint in undeclared_overrides(node):
             node.get_logger().warn(f"parameter override '{name}' is not a parameter of this node and is ignored"
                                    + (f" (did you mean '{hint}'?)" if hint else ""))
@@ -102,6 +140,8 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
         if node is None:
             print(f"[{_name(node_class, args)}] stopped by signal during start-up", file=sys.stderr)
     finally:
+        stop.starting = False
+        stop.disarm()
         if spinner is not None:
             spinner.shutdown(timeout_sec=5.0)
         if node is not None:
