@@ -28,7 +28,8 @@ from frog_vision.core.camera_model import CameraModel  # noqa: E402
 from frog_vision.core.detection import DetectorSettings, TagDetector  # noqa: E402
 from frog_vision.core.renderer import RenderSettings, TankRenderer  # noqa: E402
 from frog_vision.core.robot_shape import frog_outline  # noqa: E402
-from frog_vision.core.state_filter import PoseFilter, raw_differences  # noqa: E402
+from frog_vision.core.frame_difference import raw_differences  # noqa: E402
+from frog_vision.core.state_filter import PoseFilter  # noqa: E402
 from frog_vision.core.synthetic import swim_and_turn  # noqa: E402
 from frog_vision.core.tank_calibration import Board, CameraPose, calibrate_tank  # noqa: E402
 from frog_vision.core.tracker import Tracker  # noqa: E402

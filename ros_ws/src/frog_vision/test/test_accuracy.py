@@ -57,3 +57,23 @@ def test_frame_drops_are_bridged(camera, camera_pose, swim):
     assert 0.1 < res.dropped.mean() < 0.3
     m = res.metrics()
     assert m["detection_rate"] >= 0.99 and m["position_mean_mm"] <= 1.0
+
+
+def test_frame_difference_tracker_is_the_authors_raw_estimate(camera, camera_pose, swim):
+    """estimator frame_difference: the measured pose unfiltered, twist = raw differences of the
+    measured poses (the authors' tracker), so it is as noisy as they are, unlike the filter."""
+    from frog_vision.core.frame_difference import raw_differences
+    r = TankRenderer(camera, camera_pose, RenderSettings(noise_sigma=5.0, corner_jitter_px=0.2, seed=1))
+    res = run_sequence(r, Tracker(camera, camera_pose, estimator="frame_difference"), swim)
+    ok = res.detected
+    assert ok.mean() >= 0.99
+    assert np.allclose(res.filtered[ok, :2], res.measured[ok, :2], atol=1e-12)
+    assert np.allclose(np.angle(np.exp(1j * (res.filtered[ok, 2] - res.measured[ok, 2]))), 0, atol=1e-12)
+    idx = np.flatnonzero(ok)
+    raw = raw_differences(swim.t[idx], res.measured[idx])
+    consecutive = np.diff(idx) == 1
+    assert np.allclose(res.velocity[idx[1:]][consecutive], raw[1:][consecutive], atol=1e-9)
+    m = res.metrics()
+    assert 0.9 < m["velocity_ratio"] < 1.1 and 0.9 < m["yaw_rate_ratio"] < 1.1, m   # raw vs raw
+    with pytest.raises(ValueError, match="estimator"):
+        Tracker(camera, camera_pose, estimator="median")

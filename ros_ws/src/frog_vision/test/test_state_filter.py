@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from frog_vision.core.state_filter import FilterSettings, PoseFilter, raw_differences
+from frog_vision.core.frame_difference import raw_differences
+from frog_vision.core.state_filter import FilterSettings, PoseFilter
 
 R = np.diag([2e-4 ** 2, 2e-4 ** 2, np.radians(0.1) ** 2])
 
@@ -143,3 +144,48 @@ def test_without_kicks_the_filter_is_unchanged_and_kicks_are_causal(rng):
     assert np.allclose(f._process_model(0.6, 0.8)[0], q_in)
     with pytest.raises(ValueError, match="kick_delay"):
         FilterSettings(kick_delay=-0.1)
+
+
+def test_frame_difference_estimator_gives_the_raw_differences_and_their_noise(rng):
+    """The authors' estimate: the measured pose itself, the twist of consecutive frames (a
+    straight run: analytic), and the twist covariance of two independent frames."""
+    from frog_vision.core.frame_difference import FrameDifferenceEstimator
+    t = np.arange(0, 20, 1 / 14)
+    truth = _circle(t)
+    meas = truth + rng.normal(0, 1, truth.shape) * np.sqrt(np.diag(R))
+    meas[:, 2] = np.angle(np.exp(1j * meas[:, 2]))
+    e = FrameDifferenceEstimator()
+    states = [e.update(ti, zi, R)[0] for ti, zi in zip(t, meas)]
+    assert np.allclose(states[0].body_velocity, 0)
+    assert states[-1].pose[2] == pytest.approx(truth[-1, 2], abs=0.01)       # unwrapped
+    out = np.array([s.body_velocity for s in states[1:]])
+    raw = raw_differences(t, meas)[1:]
+    assert np.allclose(out, raw, atol=1e-12)
+    # the yaw-rate scatter is the one of two independent frames: sqrt(2) sigma / dt
+    sd_pred = np.sqrt(2 * R[2, 2]) * 14
+    assert np.std(out[:, 2] - np.radians(20)) == pytest.approx(sd_pred, rel=0.15)
+    assert states[-1].twist_covariance[2, 2] == pytest.approx(sd_pred ** 2, rel=1e-6)
+    # a straight line at 2 cm/s along 30 deg: the forward speed exactly, no lateral
+    e = FrameDifferenceEstimator()
+    th = np.radians(30)
+    for k in range(5):
+        s, why = e.update(k * 0.07, np.array([0.02 * k * 0.07 * np.cos(th), 0.02 * k * 0.07 * np.sin(th), th]), R)
+    assert why is None and s.body_velocity == pytest.approx([0.02, 0, 0], abs=1e-12)
+
+
+def test_frame_difference_estimator_holds_then_forgets_and_refuses_old_frames():
+    from frog_vision.core.frame_difference import FrameDifferenceEstimator
+    st = FilterSettings(coast_timeout=0.5, reset_timeout=1.0)
+    e = FrameDifferenceEstimator(st)
+    e.update(0.0, np.zeros(3), R)
+    e.update(0.1, np.array([0.003, 0, 0.01]), R)
+    held = e.state(0.4)
+    assert held.coasting and held.pose == pytest.approx([0.003, 0, 0.01]) and held.body_velocity[0] == \
+        pytest.approx(0.03 * np.cos(0.01))                                  # rotated into the new heading
+    assert e.state(0.7) is None                                              # past the coast timeout
+    s, why = e.update(0.05, np.zeros(3), R)
+    assert why is not None and "not newer" in why and s.pose[0] == pytest.approx(0.003)
+    s, why = e.update(2.0, np.array([0.1, 0.1, 0.2]), R)                    # after reset_timeout
+    assert why is None and np.allclose(s.body_velocity, 0) and e.n_resets == 1
+    with pytest.raises(ValueError, match="not finite"):
+        e.update(2.1, np.array([np.nan, 0, 0]), R)

@@ -12,7 +12,7 @@ import numpy as np
 
 from frog_vision.core.renderer import Occluder, TankRenderer
 from frog_vision.core.robot_shape import frog_outline
-from frog_vision.core.state_filter import raw_differences
+from frog_vision.core.frame_difference import raw_differences
 from frog_vision.core.synthetic import Trajectory
 from frog_vision.core.tracker import Tracker
 

@@ -283,22 +283,3 @@ class PoseFilter:
         coast = (t > self.last_measurement) if coasting is None else coasting
         return RobotState(float(t), x[:3].copy(), x[3:].copy(), P[:3, :3].copy(), P[3:, 3:].copy(), coast)
 
-
-def raw_differences(stamps, poses) -> np.ndarray:
-    """The authors' velocity estimate: frame-to-frame differences of the poses, rotated into
-    the body frame -> (N, 3) forward, lateral, yaw rate (first row NaN)."""
-    t = np.asarray(stamps, float)
-    p = np.asarray(poses, float)
-    out = np.full((len(t), 3), np.nan)
-    if len(t) < 2:
-        return out
-    dt = np.diff(t)
-    d = np.diff(p, axis=0)
-    d[:, 2] = np.angle(np.exp(1j * d[:, 2]))
-    v = d / dt[:, None]
-    th = p[1:, 2]
-    c, s = np.cos(th), np.sin(th)
-    out[1:, 0] = c * v[:, 0] + s * v[:, 1]
-    out[1:, 1] = -s * v[:, 0] + c * v[:, 1]
-    out[1:, 2] = v[:, 2]
-    return out

@@ -14,9 +14,14 @@ import numpy as np
 
 from frog_vision.core.camera_model import CameraModel
 from frog_vision.core.detection import DetectorSettings, TagDetector
+from frog_vision.core.frame_difference import FrameDifferenceEstimator
 from frog_vision.core.pose import PoseMeasurement, PoseSettings, TagPoseEstimator, compose_offset, invert_pose
 from frog_vision.core.state_filter import FilterSettings, PoseFilter, RobotState
 from frog_vision.core.tank_calibration import CameraPose
+
+
+#: State estimators of :class:`Tracker`.
+ESTIMATORS = ("filter", "frame_difference")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,14 +67,20 @@ class Tracker:
     detector, pose, filter : settings of the three stages
     search_window : float
         Side of the search window in tag sizes (0 = always search the whole image).
+    estimator : {"filter", "frame_difference"}
+        The state from the poses: the Kalman filter (:class:`PoseFilter`), or the authors' raw
+        pose and frame-to-frame differences (:class:`FrameDifferenceEstimator`).
     """
 
     def __init__(self, camera: CameraModel, camera_pose: CameraPose,
                  detector: DetectorSettings | None = None, pose: PoseSettings | None = None,
-                 filter: FilterSettings | None = None, search_window: float = 3.0):
+                 filter: FilterSettings | None = None, search_window: float = 3.0,
+                 estimator: str = "filter"):
+        if estimator not in ESTIMATORS:
+            raise ValueError(f"estimator {estimator!r}: expected one of {', '.join(ESTIMATORS)}")
         self.detector = TagDetector(detector)
         self.estimator = TagPoseEstimator(camera, camera_pose, pose)
-        self.filter = PoseFilter(filter)
+        self.filter = PoseFilter(filter) if estimator == "filter" else FrameDifferenceEstimator(filter)
         self.search_window = search_window
         self.camera = camera
         self.camera_pose = camera_pose

@@ -23,6 +23,11 @@ write) each firing is given to the filter, which then follows the power stroke f
 ``kick_window`` and uses a low process noise with drag while the robot coasts (see
 ``frog_vision.core.state_filter``). Until the first firing arrives, or with
 ``kick_topic`` empty, the filter runs on ``accel_noise`` / ``yaw_accel_noise`` alone.
+
+``estimator:=frame_difference`` replaces the filter with the paper's own estimate: each frame's
+raw pose, and velocities as the difference to the previous frame
+(:mod:`frog_vision.core.frame_difference`). It is what the authors' planner saw, for replaying
+their experiments; it is far noisier than the filter.
 """
 from __future__ import annotations
 
@@ -45,7 +50,7 @@ from frog_vision.core.detection import DetectorSettings
 from frog_vision.core.frame_check import FrozenFrameDetector
 from frog_vision.core.pose import PoseSettings
 from frog_vision.core.state_filter import FilterSettings
-from frog_vision.core.tracker import Tracker
+from frog_vision.core.tracker import ESTIMATORS, Tracker
 from frog_vision.nodes.common import load_camera, load_camera_pose
 from frog_vision.nodes.messages import (array_to_image, image_to_array, model_from_camera_info, set_yaw,
                                         stamp_to_s)
@@ -65,6 +70,9 @@ PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
     Param("refine_edges", True, "refine the quad edges on the full image"),
     Param("search_window", 3.0, "search around the predicted tag, in tag sizes; 0 = whole image", min=0.0, max=50.0),
     Param("corner_sigma_px", 0.2, "corner noise for the pose covariance [px]", min=0.01, max=10.0),
+    Param("estimator", "filter", "state from the tag poses: 'filter' (Kalman filter with kick inputs) or "
+          "'frame_difference' (the paper's tracker: the raw pose, velocities as differences of consecutive frames)",
+          choices=ESTIMATORS),
     Param("accel_noise", _F.accel_noise, "filter: linear acceleration noise density [(m/s^2)^2/Hz]",
           min=1e-9, max=100.0, live=True),
     Param("yaw_accel_noise", _F.yaw_accel_noise, "filter: yaw acceleration noise density [(rad/s^2)^2/Hz]",
@@ -190,7 +198,7 @@ class TrackerNode(Node):
 
     def _make_tracker(self, camera) -> None:
         self.tracker = Tracker(camera, self.camera_pose, self.detector, self.pose_settings, self.filter_settings,
-                               self.cfg["search_window"])
+                               self.cfg["search_window"], self.cfg["estimator"])
         if self.last_kick is not None:            # a firing before the first camera_info still counts
             self.tracker.kick(self.last_kick)
 
