@@ -135,7 +135,8 @@ def test_missing_or_corrupt_library_keeps_node_up_publishing_I(launch, probe, tm
     ({"depth": 9}, "depth"), ({"path_type": "spiral"}, "path_type"),
     ({"period": -1.0}, "period"), ({"path_type": "waypoints"}, "waypoint_file"),
     ({"velocity_lookahead": -1.0}, "velocity_lookahead"),
-    ({"goal_lateral_tolerance": -0.01}, "goal_lateral_tolerance"), ({"stall_speed": -0.1}, "stall_speed")])
+    ({"goal_lateral_tolerance": -0.01}, "goal_lateral_tolerance"), ({"stall_speed": -0.1}, "stall_speed"),
+    ({"replan_interval": 0.5, "transitions": "simulator"}, "replan_interval")])
 def test_bad_parameters_exit_with_a_message(launch, params, message):
     node = launch("planner_node", params=params)
     assert node.wait(60) == 2
@@ -286,3 +287,32 @@ def test_status_says_where_the_path_is_tighter_than_the_frog_can_turn(launch, pr
     probe.spin_until(straight, 20, "a decision on the line")
     s = [s for s in status if s.state == PlannerStatus.STATE_FOLLOWING][-1]
     assert not s.path_too_tight and s.path_radius_ahead == math.inf and "cutting" not in s.message
+
+
+def test_replan_interval_decides_on_the_mean_pose_and_publishes_the_newest_at_the_tick(launch, probe, library):
+    """The paper's asynchronous loop: odometry alternating 2 and 4 cm left of the line gives
+    decisions made on its mean (3 cm), published at the period ticks; a stop drops the queue."""
+    from soft_robot_interfaces.msg import PlannerStatus, Primitive
+    node = launch("planner_node", params={"library_file": str(library), "period": 0.6, "replan_interval": 0.2,
+                                          "path_type": "line", "odom_topic": "/test/odom"})
+    prims, status = [], []
+    probe.node.create_subscription(Primitive, "/frog/primitive", prims.append, QOS)
+    probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
+    odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
+    node.wait_for_log("following a line path", timeout=60)
+    probe.wait_matched(odom_pub)
+    k = [0]
+
+    def queued():
+        k[0] += 1
+        odom_pub.publish(_odom(0.05, 0.02 if k[0] % 2 else 0.04, 0.0))
+        return [s for s in status if s.state == PlannerStatus.STATE_FOLLOWING]
+    probe.spin_until(lambda: len(queued()) >= 3, 30, "three queued decisions published")
+    decided = queued()
+    for s in decided:
+        assert "queued decision on the mean of" in s.message
+        assert s.distance_to_path == pytest.approx(0.03, abs=2e-3)     # the mean, not the newest pose
+        assert _same_tick(probe, prims, s).id == s.primitive_id
+    ticks = sorted({_stamp(s) for s in status})
+    assert min(b - a for a, b in zip(ticks, ticks[1:])) > 0.45            # one decision per 0.6 s period
+    assert node.stop() == 0 and node.stopped_cleanly

@@ -184,3 +184,28 @@ def test_gradient_correction_recovers_a_linear_library_exactly():
     np.testing.assert_array_equal(plain.lookup(queries), table[:, nearest].transpose(1, 0, 2))
     with pytest.raises(ValueError, match="at least 4"):
         TransitionModel(states[:3], table[:, :3], list("ABCDEFGHI"), gradient_correction=True)
+
+
+@pytest.mark.parametrize("metric", ["relative", "euclidean"])
+def test_authors_lookup_searches_their_library_columns_and_returns_the_states_own_transitions(metric):
+    """lookup authors_code: the neighbour is the brute-force nearest of the mapped states
+    (x right = -left, y forward, deg/s), written out by hand here, and its transitions are the
+    real state's."""
+    init, trans = _random_model_arrays()
+    mapped = np.column_stack([-init[:, 1], init[:, 0], np.degrees(init[:, 2])])
+    m = TransitionModel(init, trans, list("ABCDEFGHI"), metric=metric, lookup="authors_code")
+    scale = np.ptp(mapped, axis=0)
+    q = _queries()
+    idx, _ = m.nearest(q)
+    for i, query in enumerate(q):
+        assert idx[i, 0] == _brute_force(mapped, query, metric, 1, scale)[0]
+    assert np.array_equal(m.lookup(q)[:, 3], trans[3, idx[:, 0]])
+    # a robot swimming forward at 25 mm/s without turning is matched, as in their code, with the
+    # state that slides to the right at 25 mm/s (their xdot0) with no forward speed and no turn
+    states = np.array([[0.025, 0.0, 0.0], [0.0, -0.025, 0.0], [0.0, 0.0, 0.2]])
+    m3 = TransitionModel(states, trans[:, :3], list("ABCDEFGHI"), metric="relative", lookup="authors_code")
+    assert m3.nearest([0.025, 0.0, 0.0])[0][0, 0] == 1
+    assert TransitionModel(states, trans[:, :3], list("ABCDEFGHI"), metric="relative").nearest(
+        [0.025, 0.0, 0.0])[0][0, 0] == 0
+    with pytest.raises(ValueError, match="lookup"):
+        TransitionModel(init, trans, list("ABCDEFGHI"), lookup="deg")

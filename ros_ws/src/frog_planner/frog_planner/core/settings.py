@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass, field
 
 from .paths import path_from_spec
+from .transition_model import LOOKUPS
 from .tree_search import MAX_DEPTH, CostWeights
 
 PATH_TYPES = ("line", "sine", "ellipse", "waypoints")
@@ -41,6 +42,9 @@ class PlannerSettings:
     metric: str = _setting("euclidean", "nearest-neighbour metric: scaled euclidean (KD-tree) or the paper's "
                            "relative metric", choices=("euclidean", "relative"))
     k_neighbours: int = _setting(1, "nearest library states averaged", (1, 64), flags=("--k",))
+    lookup: str = _setting("si", "nearest-state search: si (the state as it is) or authors_code (as the authors' "
+                           "planner searched their library: its velocity columns in the simulator's frame, x right "
+                           "and y forward, its yaw rate in deg/s; for replaying their runs)", choices=LOOKUPS)
     gradient_correction: bool = _setting(True, "correct the nearest state's transitions to first order for the "
                                          "velocity difference (library-fitted slopes); false = the paper")
     w_distance: float = _setting(500.0, "eq. 19 weight w_a of the distance to the path", (0.0, 1e6), "1/m",
@@ -82,7 +86,7 @@ class PlannerSettings:
     def model_kwargs(self) -> dict:
         """Keyword arguments of ``TransitionModel.load``."""
         return {"period": self.period, "metric": self.metric, "k": self.k_neighbours,
-                "gradient_correction": self.gradient_correction}
+                "gradient_correction": self.gradient_correction, "lookup": self.lookup}
 
     def planner_kwargs(self) -> dict:
         """Keyword arguments of ``Planner`` (after the model and the path)."""

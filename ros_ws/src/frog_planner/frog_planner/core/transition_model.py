@@ -11,6 +11,15 @@ Two neighbour metrics over the library's initial body velocities v_k = (u_k, v_k
   guarded as max(|v_i|, relative_floor * scale_i) so a near-zero velocity does not divide by 0.
 
 With ``k > 1`` the transitions of the k nearest states are averaged (heading as a circular mean).
+
+``lookup="authors_code"`` searches the neighbours as the authors' published planner did
+(``control_code/src/planner.py`` of softmachineslab/frog; the library's layout in
+``control_code/data/load_simfrog_data.py``): their library stored the initial velocities in
+the simulator's frame, x to the robot's right and y forward, and the initial yaw rate in deg/s,
+and the planner compared the robot's (forward, left, rad/s) with those columns unchanged. In
+this module's SI body frame that is a search over the states mapped by :data:`AUTHORS_LOOKUP`.
+Only the choice of the neighbour changes; its transitions are applied as usual. It exists to
+replay the authors' experiments with the planner they ran.
 """
 
 import itertools
@@ -21,6 +30,10 @@ from scipy.spatial import cKDTree
 from .library_file import load_motion_library
 
 METRICS = ("euclidean", "relative")
+LOOKUPS = ("si", "authors_code")
+#: (forward, left, yaw rate rad/s) -> the authors' library columns (xdot0 = right = -left,
+#: ydot0 = forward, tdot0 in deg/s), which their planner compared with the robot's state as is.
+AUTHORS_LOOKUP = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 180.0 / np.pi]])
 _RELATIVE_PROBES = 7       # extra Euclidean neighbours probed to bound the relative distance
 _RELATIVE_MAX_BALL = 0.3   # scaled radius above which a query is ranked against all states
 
@@ -79,6 +92,9 @@ class TransitionModel:
         Floor of the relative metric's denominators, as a fraction of ``scale``.
     source : str
         Where the model came from (for messages).
+    lookup : {"si", "authors_code"}
+        Compare queries with the initial states (default), or with the authors' library columns
+        of them (see the module docstring).
     gradient_correction : bool
         False (the paper): a query gets its nearest state's transitions unchanged. True: they
         are corrected to first order for the difference between the query and that state,
@@ -98,7 +114,7 @@ class TransitionModel:
 
     def __init__(self, initial_states, transitions, primitive_names, primitive_bits=None, period=None,
                  metric="euclidean", k=1, scale=None, relative_floor=0.05, source="",
-                 gradient_correction=False):
+                 gradient_correction=False, lookup="si"):
         init = np.asarray(initial_states, dtype=float)
         trans = np.asarray(transitions, dtype=float)
         if init.ndim != 2 or init.shape[1] != 3:
@@ -110,6 +126,8 @@ class TransitionModel:
             raise ValueError(f"{len(names)} primitive names for {trans.shape[0]} primitives")
         if metric not in METRICS:
             raise ValueError(f"metric {metric!r} is unknown; expected one of {list(METRICS)}")
+        if lookup not in LOOKUPS:
+            raise ValueError(f"lookup {lookup!r} is unknown; expected one of {list(LOOKUPS)}")
         usable = np.all(np.isfinite(trans), axis=(0, 2)) & np.all(np.isfinite(init), axis=1)
         if not np.any(usable):
             raise ValueError(f"{source or 'library'}: no initial state has a finite transition for every primitive")
@@ -119,8 +137,12 @@ class TransitionModel:
         n = self.initial_states.shape[0]
         if not 1 <= int(k) <= n:
             raise ValueError(f"k {k} is out of range; expected 1 <= k <= {n} (usable initial states)")
+        self.lookup_mode = lookup
+        # the states the neighbour search compares queries with (the initial states, or the
+        # authors' columns of them); scale, tree and metric work on these
+        self._search = self.initial_states @ AUTHORS_LOOKUP.T if lookup == "authors_code" else self.initial_states
         if scale is None:
-            scale = np.ptp(self.initial_states, axis=0)
+            scale = np.ptp(self._search, axis=0)
             scale = np.where(scale > 0.0, scale, 1.0)
         scale = np.asarray(scale, dtype=float)
         if scale.shape != (3,) or not np.all(scale > 0.0):
@@ -135,7 +157,7 @@ class TransitionModel:
         self.scale = scale
         self.relative_floor = float(relative_floor)
         self.source = str(source)
-        self._tree = cKDTree(self.initial_states / scale)
+        self._tree = cKDTree(self._search / scale)
         # Primitive-major -> state-major copy so one gather returns all P transitions of a state.
         self._by_state = np.ascontiguousarray(np.transpose(self.transitions, (1, 0, 2)))  # (N, P, 6)
         self.gradient_correction = bool(gradient_correction)
@@ -152,7 +174,7 @@ class TransitionModel:
 
     @classmethod
     def load(cls, path, period=1.5, metric="euclidean", k=1, scale=None, relative_floor=0.05,
-             gradient_correction=False):
+             gradient_correction=False, lookup="si"):
         """Transition model from a library file for period T (see :func:`load_motion_library`).
 
         Parameters
@@ -168,11 +190,11 @@ class TransitionModel:
         FileNotFoundError, LibraryFormatError, ValueError
         """
         return cls.from_library(load_motion_library(path), period, metric, k, scale, relative_floor,
-                                gradient_correction)
+                                gradient_correction, lookup)
 
     @classmethod
     def from_library(cls, library, period=1.5, metric="euclidean", k=1, scale=None, relative_floor=0.05,
-                     gradient_correction=False):
+                     gradient_correction=False, lookup="si"):
         """Transition model from a :class:`MotionLibrary` for period T in s.
 
         Initial states with a failed simulation (``converged`` False) for any primitive are dropped.
@@ -181,7 +203,7 @@ class TransitionModel:
         transitions[~library.converged] = np.nan
         return cls(library.initial_states, transitions, library.primitive_names,
                    library.primitive_bits, period, metric, k, scale, relative_floor, library.source,
-                   gradient_correction)
+                   gradient_correction, lookup)
 
     @property
     def n_primitives(self):
@@ -240,7 +262,7 @@ class TransitionModel:
         n_probe = min(self.n_states, k + _RELATIVE_PROBES)
         _, probe = self._tree.query(scaled, k=n_probe)
         probe = probe.reshape(n_q, n_probe)
-        d_probe = np.sqrt(np.sum(((q[:, None, :] - self.initial_states[probe]) / den[:, None, :]) ** 2, axis=-1))
+        d_probe = np.sqrt(np.sum(((q[:, None, :] - self._search[probe]) / den[:, None, :]) ** 2, axis=-1))
         bound = np.partition(d_probe, k - 1, axis=1)[:, k - 1]
         radius = bound / np.min(self.scale / den, axis=1) * (1.0 + 1e-9) + 1e-12
         idx = np.empty((n_q, k), dtype=np.intp)
@@ -248,7 +270,7 @@ class TransitionModel:
         wide = radius > _RELATIVE_MAX_BALL
         if np.any(wide):                                                     # brute force over all states
             w = np.flatnonzero(wide)
-            d = np.sqrt(np.sum(((q[w, None, :] - self.initial_states[None]) / den[w, None, :]) ** 2, axis=-1))
+            d = np.sqrt(np.sum(((q[w, None, :] - self._search[None]) / den[w, None, :]) ** 2, axis=-1))
             if k == 1:
                 part = np.argmin(d, axis=1)[:, None]
             else:
@@ -263,7 +285,7 @@ class TransitionModel:
             lengths = np.fromiter((len(c) for c in lists), dtype=np.intp, count=len(narrow))
             cand = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.intp, count=int(lengths.sum()))
             owner = np.repeat(narrow, lengths)
-            d = np.sqrt(np.sum(((q[owner] - self.initial_states[cand]) / den[owner]) ** 2, axis=1))
+            d = np.sqrt(np.sum(((q[owner] - self._search[cand]) / den[owner]) ** 2, axis=1))
             order = np.lexsort((cand, d, owner))                 # by query, then distance, then index
             starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
             pick = order[starts[:, None] + np.arange(k)]         # each ball holds the k probes that set D

@@ -195,6 +195,17 @@ def _chain(pose, body_velocity, depth, transitions):
     return poses, first, velocities
 
 
+def check_rows(rows, depth, n_primitives) -> list:
+    """The level sizes P, P^2, ... of a depth-``depth`` tree; raises ValueError if ``rows`` is not
+    its (P + ... + P^H, 6) array (see :func:`tree_from_rows`)."""
+    sizes = [int(n_primitives) ** (d + 1) for d in range(int(depth))]
+    shape = np.shape(rows)
+    if shape != (sum(sizes), 6):
+        raise ValueError(f"rows have shape {shape}; a depth-{depth} tree of {n_primitives} primitives needs "
+                         f"({sum(sizes)}, 6)")
+    return sizes
+
+
 def tree_from_rows(pose, rows, depth, n_primitives):
     """The tree of :func:`expand_tree` from given transitions instead of the library's.
 
@@ -217,10 +228,7 @@ def tree_from_rows(pose, rows, depth, n_primitives):
     """
     depth, p = int(depth), int(n_primitives)
     rows = np.asarray(rows, dtype=float)
-    sizes = [p ** (d + 1) for d in range(depth)]
-    if rows.shape != (sum(sizes), 6):
-        raise ValueError(f"rows have shape {rows.shape}; a depth-{depth} tree of {p} primitives needs "
-                         f"({sum(sizes)}, 6)")
+    sizes = check_rows(rows, depth, p)
     offsets = np.cumsum([0] + sizes)
     return _chain(pose, np.zeros(3), depth,
                   lambda level, vel: rows[offsets[level]:offsets[level + 1]].reshape(-1, p, 6))

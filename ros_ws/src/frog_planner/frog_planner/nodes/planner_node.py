@@ -26,6 +26,13 @@ A response that has not arrived by then, a refusal or a missing service makes th
 decision a library decision on the newest pose, with a WARN and a count in diagnostics
 (``fallback_decisions``). Depth 2 expands all 81 sequences, or with ``beam_width`` k only
 the k first primitives the library ranks best.
+
+``replan_interval`` > 0 runs the paper's own loop instead (its published control code, for
+replaying the authors' experiments): every ``replan_interval`` seconds a library decision is
+made on the mean of the odometry received since the previous one
+(:mod:`frog_planner.core.state_window`), and each period tick publishes the newest of them. A
+decision then acts on a state some 0.3-1 s old, as on the authors' robot; 0 (the default)
+decides at the tick on the newest pose.
 """
 
 from __future__ import annotations
@@ -50,6 +57,7 @@ from frog_planner.core.feasibility import radius_ahead, steady_turns, tight_stre
 from frog_planner.core.library_file import LibraryFormatError
 from frog_planner.core.planner import Planner
 from frog_planner.core.settings import PathSettings, PlannerSettings
+from frog_planner.core.state_window import StateWindow
 from frog_planner.core.transition_model import TransitionModel
 from frog_planner.nodes.rollout_client import RolloutClient, lead_time
 
@@ -79,6 +87,10 @@ _NODE_PARAMS = [
           "library for that decision", min=0.05, max=0.95, live=True),
     Param("beam_width", 0, "transitions simulator, depth 2: roll out only the first primitives the library "
           "ranks best, this many; 0 = all 9", min=0, max=9, live=True),
+    Param("replan_interval", 0.0, "> 0: the paper's asynchronous loop: decide this often [s] on the mean of the "
+          "odometry since the last decision, and publish the newest decision at each period tick (the authors "
+          "averaged 9 tracker states, about 0.63 s); 0 = decide at the tick on the newest pose (transitions "
+          "library only)", min=0.0, max=10.0),
     Param("initial_progress", 0.0, "progress along the path to start from, in [0, 1] (a restarted planner "
           "resumes where it was)", min=0.0, max=1.0),
 ]
@@ -104,6 +116,8 @@ def _check_settings(values: dict) -> str | None:
         _settings(PlannerSettings, values, _PLANNER_FIELDS)
     except ValueError as exc:
         return str(exc)
+    if values.get("transitions") == "simulator" and values.get("replan_interval", 0.0) > 0:
+        return "replan_interval (the paper's asynchronous loop) goes with transitions library only"
     if values.get("transitions") == "simulator" and values.get("depth", 1) > SIMULATOR_MAX_DEPTH:
         return (f"transitions simulator rolls out depth 1-{SIMULATOR_MAX_DEPTH}; depth is {values['depth']} "
                 f"(lower depth, or use transitions library)")
@@ -165,6 +179,10 @@ class PlannerNode(Node):
         self.goal_reached = False
         self._last_state = None
         self.publish_path()
+        self.window = StateWindow()     # replan_interval > 0: the odometry since the last decision
+        self.queued = None              # ... and the newest decision (decision, its newest pose's stamp)
+        if p["replan_interval"] > 0:
+            self.create_timer(p["replan_interval"], self.replan)
         self.create_timer(self.settings.period, self.decide)
         self.diagnostics = NodeDiagnostics(self, "planner", self._diagnostics, hardware_id="planner")
         self.get_logger().info(
@@ -273,6 +291,7 @@ class PlannerNode(Node):
                                     throttle_duration_sec=2.0)
             return
         self.odom = ((p.x, p.y, yaw_of(q)), (tw.linear.x, tw.linear.y, tw.angular.z))
+        self.window.add(*self.odom)
         self.odom_received = self.get_clock().now()
         self.odom_stamp = Time.from_msg(msg.header.stamp, clock_type=self.odom_received.clock_type)
 
@@ -284,6 +303,8 @@ class PlannerNode(Node):
         if self.goal_reached:
             self.planner.reset()
             self.goal_reached = False
+        self.window.clear()
+        self.queued = None
         self.running = True
         response.success, response.message = True, f"following the {self.path.name} path"
         return response
@@ -405,6 +426,9 @@ class PlannerNode(Node):
         if blocked is None and self.cfg["transitions"] == "simulator":
             self.start_simulator_decision()
             return
+        if blocked is None and self.cfg["replan_interval"] > 0:
+            self.execute_queued()
+            return
         if blocked is None:
             pose, velocity = self.odom
             try:
@@ -441,6 +465,39 @@ class PlannerNode(Node):
             self.stale_decisions += 1           # a decision refused for a stale or missing pose
         self._log_state(state, reason)
         self._publish(8, "I", state, reason)
+
+    # -- the paper's asynchronous loop (replan_interval > 0) -----------------------------------------
+    def replan(self) -> None:
+        """Decide on the mean of the odometry since the last decision; queue it for the next tick."""
+        if self._state() is not None:
+            self.window.clear()                 # stopped or stale: nothing old goes into a later mean
+            self.queued = None
+            return
+        if self.window.count == 0:
+            return
+        pose, velocity, n = self.window.mean()
+        self.window.clear()
+        try:
+            d = self.planner.decide(pose, velocity)
+        except ValueError as exc:
+            self.get_logger().error(f"planner rejected the mean state: {exc}", throttle_duration_sec=2.0)
+            return
+        self.queued = (d, self.odom_stamp, n)
+
+    def execute_queued(self) -> None:
+        """At the tick: publish the newest queued decision, unless it is missing or its pose stale."""
+        S = self._Status
+        now = self.get_clock().now()
+        if self.queued is None:
+            self._refuse((S.STATE_WAITING, "no decision queued yet (replan_interval)"))
+            return
+        d, stamp, n = self.queued
+        age = (now - stamp).nanoseconds * 1e-9
+        bound = self.cfg["stale_periods"] * self.settings.period
+        if age > bound:
+            self._refuse((S.STATE_WAITING, f"the queued decision's pose is stale ({age:.2f} s; bound {bound:.2f} s)"))
+            return
+        self._act(d, now, f"following (queued decision on the mean of {n} poses, newest {age:.2f} s old)")
 
     # -- transitions: simulator ----------------------------------------------------------------
     def start_simulator_decision(self) -> None:

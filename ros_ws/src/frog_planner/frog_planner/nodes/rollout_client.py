@@ -14,7 +14,7 @@ import math
 import numpy as np
 from geometry_msgs.msg import Pose2D, Twist
 
-from frog_planner.core.tree_search import tree_from_rows
+from frog_planner.core.tree_search import check_rows, tree_from_rows
 
 #: A limb fired longer ago than this has relaxed (the actuation model's recovery is ~1-2 s).
 FIRING_MEMORY_S = 10.0
@@ -69,13 +69,16 @@ class RolloutClient:
         if list(response.primitive_names) != list(names):
             return None, (f"the simulator's primitives {list(response.primitive_names)} are not the "
                           f"library's {list(names)}")
-        rows = np.asarray(response.transitions, dtype=float).reshape(-1, 6)
-        if not np.any(np.all(np.isfinite(rows[-len(names) ** depth:]), axis=1)):
-            return None, "the rollouts returned no finite leaf"
+        values = np.asarray(response.transitions, dtype=float)
         try:
-            tree_from_rows(np.zeros(3), rows, depth, len(names))    # the shape check
+            if values.size % 6:
+                raise ValueError(f"{values.size} transition values are not rows of 6")
+            rows = values.reshape(-1, 6)
+            check_rows(rows, depth, len(names))
         except ValueError as exc:
             return None, str(exc)
+        if not np.any(np.all(np.isfinite(rows[-len(names) ** depth:]), axis=1)):
+            return None, "the rollouts returned no finite leaf"
         return (lambda pose, velocity, d: tree_from_rows(pose, rows, d, len(names))), None
 
 
