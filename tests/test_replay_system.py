@@ -92,6 +92,8 @@ def test_short_replay_writes_the_comparison(sin1_run, library, tmp_path):
 
 @pytest.mark.parametrize("args, named", [
     (["--path", "line", "--aligned-tag"], "--aligned-tag"),
+    (["--path", "line", "--ideal-loop"], "--ideal-loop"),
+    (["--replay-all", ".", "--ideal-loop"], "--ideal-loop goes with --paper-cost"),
     (["--path", "line", "--yaw-disturbance-sd", "-1"], "--yaw-disturbance-sd"),
     (["--path", "line", "--yaw-disturbance-tau", "0"], "--yaw-disturbance-tau"),
 ])

@@ -32,6 +32,31 @@ from frog_twin.core import replay
 #: run's duration, plus REPLAY_EXTRA_S.
 REPLAY_DURATION_FACTOR = 2.0
 REPLAY_EXTRA_S = 15.0
+#: The authors' planner loop (their published control code, softmachineslab/frog control_code/src):
+#: it decided on the mean of the 9 tracker states it polled since its last decision, about
+#: 9 x 0.07 s of frames (its share of the tracking loop, as the logger's), and an executor sent
+#: the newest decision once a period.
+PAPER_REPLAN_INTERVAL_S = 0.63
+
+
+def paper_loop_params(args) -> dict:
+    """Node parameters of the robot's own loop for ``--paper-cost`` (unless ``--ideal-loop``): the
+    planner's asynchronous decisions on mean states, its library search as coded (axes and yaw
+    units of the authors' library, ``TransitionModel`` lookup), and the authors' tracker, which
+    gave the raw pose and frame-to-frame velocity differences (with vision)."""
+    if not args.paper_cost or getattr(args, "ideal_loop", False):
+        return {}
+    params = {"planner_node": {"replan_interval": PAPER_REPLAN_INTERVAL_S, "lookup": "authors_code"}}
+    if not args.no_vision:
+        params["tracker_node"] = {"estimator": "frame_difference"}
+    return params
+
+
+def _merged(first: dict, then: dict) -> dict:
+    out = {node: dict(values) for node, values in first.items()}
+    for node, values in then.items():
+        out.setdefault(node, {}).update(values)
+    return out
 
 
 def replay_planner_settings(args, period: float) -> PlannerSettings:
@@ -69,7 +94,8 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
     print(f"replay {progress}{setup.name}: period {setup.period:.4f} s, start ({x0:.3f}, {y0:.3f}) m "
           f"{math.degrees(h0):.1f} deg, tag offset {math.degrees(setup.tag_offset):+.1f} deg "
           f"({setup.tag_offset_source}), twin's tag {'aligned' if args.aligned_tag else 'turned as mounted'}; "
-          f"planner {'paper' if args.paper_cost else 'project'}; "
+          f"planner {'paper' if args.paper_cost else 'project'}"
+          f"{' in the robot' + chr(39) + 's loop' if paper_loop_params(args) else ''}; "
           f"at most {duration:.0f} s simulated", flush=True)
     twins, tracks = [], []
     # the robot's planner saw the tag's heading, body heading - offset: the twin's tag is mounted
@@ -79,6 +105,7 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
         a = copy.copy(args)
         a.seed = seed
         a.tag_yaw = tag_yaw
+        a.node_params = _merged(paper_loop_params(args), getattr(args, "node_params", {}))   # --node-param last
         label = setup.name if len(args.seed_list) == 1 else f"{setup.name}_s{seed}"
         rec, tm = run_twin(a, label, folder / label, path_settings, setup.start_pose, settings, duration)
         t0 = tm["start_time_s"]
@@ -100,7 +127,8 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
     (folder / f"{setup.name}_replay.txt").write_text(text + "\n")
     _write_rows(rows, folder / f"{setup.name}_replay.csv")
     result = {"run": setup.name, "setup": setup.summary(), "planner": dataclasses.asdict(settings),
-              "planner_kind": "paper" if args.paper_cost else "project", "real": real, "twins": twins,
+              "planner_kind": "paper" if args.paper_cost else "project",
+              "robot_loop_params": paper_loop_params(args), "real": real, "twins": twins,
               "rows": rows, "plot": str(png),
               "settings": {"vision": not args.no_vision, "serial": not args.direct, "seeds": args.seed_list,
                            "real_time_factor": args.real_time_factor, "limb_strength_sd": args.limb_strength_sd,

@@ -594,6 +594,11 @@ def main(argv=None) -> int:
                     help="twin runs per log with seeds --seed, --seed+1, ... (pooled in the summary)")
     rg.add_argument("--tag-offset-deg", type=float, default=None,
                     help="body heading - tag theta [deg] (default: estimated on the folder's line runs)")
+    rg.add_argument("--ideal-loop", action="store_true",
+                    help="with --paper-cost: the paper's cost on the project's loop (Kalman-filtered tracker, a "
+                         "decision at each tick on the newest pose); default: the robot's own loop, decisions on "
+                         "the mean of the last 0.63 s of raw poses and frame-difference velocities, the newest "
+                         "sent each period (planner_node replan_interval, tracker_node estimator)")
     rg.add_argument("--aligned-tag", action="store_true",
                     help="draw the twin's tag aligned with the body (the planner then sees the true heading); "
                          "default: turned by -offset as on the robot, whose planner saw the tag's heading")
@@ -713,13 +718,16 @@ def main(argv=None) -> int:
                 ap.error(f"--replay {what} {f} does not exist")
         if args.replay_all is not None and not args.replay_all.is_dir():
             ap.error(f"--replay-all {args.replay_all} is not a folder")
+        if args.ideal_loop and not args.paper_cost:
+            ap.error("--ideal-loop goes with --paper-cost (the project's planner always runs the project's loop)")
     else:
         args.path = args.path or "all"
         if args.path not in (*PATH_NAMES, "all"):
             ap.error(f"--path {args.path!r}: expected one of {', '.join(PATH_NAMES)}, all (or --replay RUN.csv)")
-        if (args.paper_cost or args.tag_offset_deg is not None or args.aligned_tag
+        if (args.paper_cost or args.tag_offset_deg is not None or args.aligned_tag or args.ideal_loop
                 or (args.seeds != 1 and not (args.fault_campaign or args.planner_compare))):
-            ap.error("--paper-cost, --tag-offset-deg and --aligned-tag go with --replay / --replay-all, --seeds "
+            ap.error("--paper-cost, --tag-offset-deg, --aligned-tag and --ideal-loop go with --replay / --replay-all, "
+                     "--seeds "
                      "also with --fault-campaign")
     if not args.stuck_timeout > 0:
         ap.error("--stuck-timeout must be > 0")
