@@ -36,9 +36,12 @@ shared/data/frog/hardware_runs/) from its logged start pose (tag offset applied)
 fitted decision period, along its reference path as waypoints; the real and the twin's
 trajectories overlaid on the path (<run>_replay.png), a table real vs twin (mean / max
 distance, signed mean lateral offset + left of the path, time, primitives, speed) and a JSON.
---paper-cost runs the paper's planner (what the robot ran), otherwise the project's settings:
+--paper-cost runs the paper's planner in the robot's own loop (the authors' code: their library
+search, decisions on 0.63 s mean states, raw frame-difference tracking), --ideal-loop the same cost
+on the project's loop; otherwise the project's settings:
 
 frog-twin --replay ../shared/data/frog/hardware_runs/sin1.csv --paper-cost          # whole chain + MP4
+frog-twin --replay-all ../shared/data/frog/hardware_runs --paper-cost --ideal-loop --seeds 3
 frog-twin --replay RUN.csv --path RUN_path.csv --no-vision --direct --duration 20   # fast, simulator only
 frog-twin --replay-all ../shared/data/frog/hardware_runs --no-vision --direct --paper-cost
 frog-twin --replay-all DIR --no-vision --direct --seeds 3 --out runs/replay3        # pooled over seeds
@@ -610,7 +613,8 @@ def main(argv=None) -> int:
                     help="run the paper's planner, the project's, and the simulator in the loop at depth 1 and 2 "
                          "on each path with --seeds seeds; one table (compare.md) and one figure per path")
     cg.add_argument("--compare-planners", default="paper,project,sim-d1,sim-d2",
-                    help="planners compared (comma-separated of paper, project, sim-d1, sim-d2)")
+                    help="planners compared (comma-separated of paper, project, sim-d1, sim-d2, sim-paper: the "
+                         "paper's cost on the simulator's predictions)")
     cg.add_argument("--compare-beam", type=int, default=3, choices=range(0, 10), metavar="K",
                     help="sim-d2 rolls out the K first primitives the library ranks best (0 = all 9; default 3)")
     cg.add_argument("--compare-paths", default="all",
