@@ -6,7 +6,9 @@ Planners, on the same twin and library:
 * ``paper``: eq. 19 at the leaf, weights 500/50/300, tangent heading, the relative metric;
 * ``project``: this project's library planner at its defaults (the command line's settings);
 * ``sim-d1`` / ``sim-d2``: the project's cost with ``transitions: simulator`` at depth 1 / 2
-  (depth 2 with a beam of ``--compare-beam`` first primitives; 0 = all 81 sequences).
+  (depth 2 with a beam of ``--compare-beam`` first primitives; 0 = all 81 sequences);
+* ``sim-paper``: the paper's cost (as ``paper``) with ``transitions: simulator`` at depth 1, which
+  separates the better predictions from the project's cost.
 
 Paths: the paper's three, and each shared hardware run's reference path as waypoints from
 its logged start pose with its fitted decision period (``--compare-runs DIR``). Output in the
@@ -27,14 +29,15 @@ import numpy as np
 
 from frog_planner.core.settings import PlannerSettings
 
-PLANNERS = ("paper", "project", "sim-d1", "sim-d2")
+PLANNERS = ("paper", "project", "sim-d1", "sim-d2", "sim-paper")
 _FALLBACK = re.compile(r"decisions: (\d+) simulator, (\d+) library fallbacks")
 
 
 def planner_settings(kind: str, base: PlannerSettings, period: float) -> tuple[PlannerSettings, str]:
     """(settings, transitions) of one compared planner at ``period``."""
-    if kind == "paper":
-        return PlannerSettings.paper(period=period, metric="relative"), "library"
+    if kind in ("paper", "sim-paper"):
+        return (PlannerSettings.paper(period=period, metric="relative"),
+                "library" if kind == "paper" else "simulator")
     project = dataclasses.replace(base, period=period)
     if kind == "project":
         return project, "library"
@@ -92,7 +95,7 @@ def plot_path(path_name: str, path_points, tracks: list[tuple[str, np.ndarray]],
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 5.5))
     ax.plot(path_points[:, 0] * 100, path_points[:, 1] * 100, "k--", lw=1.5, label="path")
-    colours = dict(zip(PLANNERS, ("tab:red", "tab:blue", "tab:green", "tab:purple")))
+    colours = dict(zip(PLANNERS, ("tab:red", "tab:blue", "tab:green", "tab:purple", "tab:orange")))
     seen = set()
     for label, xy in tracks:
         kind = label.split(" ")[0]

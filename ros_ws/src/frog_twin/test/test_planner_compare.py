@@ -44,3 +44,5 @@ def test_compared_planners_share_the_period_and_differ_as_specified():
     for kind, depth in (("sim-d1", 1), ("sim-d2", 2)):
         s, t = planner_settings(kind, base, 1.43)
         assert t == "simulator" and s.depth == depth and s.w_distance == base.w_distance
+    sim_paper, t = planner_settings("sim-paper", base, 1.43)
+    assert t == "simulator" and sim_paper == paper        # the paper's cost, only the predictions differ
