@@ -291,7 +291,7 @@ def test_status_says_where_the_path_is_tighter_than_the_frog_can_turn(launch, pr
 
 def test_replan_interval_decides_on_the_mean_pose_and_publishes_the_newest_at_the_tick(launch, probe, library):
     """The paper's asynchronous loop: odometry alternating 2 and 4 cm left of the line gives
-    decisions made on its mean (3 cm), published at the period ticks; a stop drops the queue."""
+    decisions made on its mean (3 cm), published at the period ticks."""
     from soft_robot_interfaces.msg import PlannerStatus, Primitive
     node = launch("planner_node", params={"library_file": str(library), "period": 0.6, "replan_interval": 0.2,
                                           "path_type": "line", "odom_topic": "/test/odom"})
