@@ -30,7 +30,8 @@ the k first primitives the library ranks best.
 ``replan_interval`` > 0 runs the paper's own loop instead (its published control code, for
 replaying the authors' experiments): every ``replan_interval`` seconds a library decision is
 made on the mean of the odometry received since the previous one
-(:mod:`frog_planner.core.state_window`), and each period tick publishes the newest of them. A
+(:mod:`frog_planner.core.state_window`), and each period tick publishes the newest of them, each
+once (none new: primitive I). A
 decision then acts on a state some 0.3-1 s old, as on the authors' robot; 0 (the default)
 decides at the tick on the newest pose.
 """
@@ -485,13 +486,14 @@ class PlannerNode(Node):
         self.queued = (d, self.odom_stamp, n)
 
     def execute_queued(self) -> None:
-        """At the tick: publish the newest queued decision, unless it is missing or its pose stale."""
+        """At the tick: publish the newest queued decision once (as the authors' executor took it off
+        its queue), unless there is none since the last tick or its pose is stale."""
         S = self._Status
         now = self.get_clock().now()
         if self.queued is None:
-            self._refuse((S.STATE_WAITING, "no decision queued yet (replan_interval)"))
+            self._refuse((S.STATE_WAITING, "no new decision queued since the last tick (replan_interval)"))
             return
-        d, stamp, n = self.queued
+        (d, stamp, n), self.queued = self.queued, None
         age = (now - stamp).nanoseconds * 1e-9
         bound = self.cfg["stale_periods"] * self.settings.period
         if age > bound:
