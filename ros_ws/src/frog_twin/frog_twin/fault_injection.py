@@ -22,6 +22,10 @@ DISCOVERY_S = 3.0
 CHECKED_TOPICS = ("/frog/primitive", "/frog/planner/status", "/frog/bridge/sent", "/frog/limb_activation")
 
 
+#: History of the watch's subscriptions: 5000 odometry messages are 2.8 min at 30 Hz.
+WATCH_DEPTH = 5000
+
+
 def _stamp(msg) -> float:
     return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
@@ -45,7 +49,11 @@ class RunObserver:
         self.restarts = []              # sim times of node restarts (see discovery_gaps)
         self.planner_restarts = []      # sim times of planner_node's restarts
         self._up_since = None
-        reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        # deep: the checks need every message, and a reliable keep-last reader still drops the oldest
+        # when its owner does not take them for a while (100 odometry messages are 3.3 s at 30 Hz). A
+        # CI run's watch had no odometry for 5 s while the planner went on deciding on fresh poses,
+        # and judged its firings stale; a watch busy for > 3.3 s is one way that happens
+        reliable = QoSProfile(depth=WATCH_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         node.create_subscription(Clock, "/clock", self._on_clock, QoSProfile(depth=1,
                                  reliability=ReliabilityPolicy.BEST_EFFORT))
         node.create_subscription(Odometry, "/frog/odom", lambda m: self.obs.odom.append(_stamp(m)), reliable)
