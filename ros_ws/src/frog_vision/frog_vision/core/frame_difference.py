@@ -55,6 +55,7 @@ class FrameDifferenceEstimator:
     def __init__(self, settings: FilterSettings | None = None):
         self.settings = settings or FilterSettings()
         self.n_rejected = 0
+        self.n_resets = 0
         self.reset()
 
     def reset(self) -> None:
@@ -65,7 +66,6 @@ class FrameDifferenceEstimator:
         self._twist_cov = np.zeros((3, 3))
         self.t: float | None = None
         self.last_measurement: float | None = None
-        self.n_resets = getattr(self, "n_resets", 0)
 
     @property
     def initialised(self) -> bool:
