@@ -48,7 +48,7 @@ from .core.simulation import DEFAULT_TIME_STEP, FrogSimulation
 
 TURN_PRIMITIVES = ('C', 'D', 'E', 'F')
 SLIP_PRIMITIVES = ('E', 'F')
-#: The physics of issue 11 that the calibration starts from (see README "Fidelity").
+#: The physics of issue 11 that the calibration starts from (docs/results.md, "Simulator fidelity").
 PHYSICAL_BASE = {'body_fluid_section': 'height', 'added_mass_lumping': 'direction_average'}
 #: The model before issue 11 (4 mm body rod, 4 mm limbs, paper's lumping, one root angle).
 LEGACY_MODEL = {'body_fluid_section': 'rod', 'added_mass_lumping': 'normal', 'limb_fluid_width': 0.004,

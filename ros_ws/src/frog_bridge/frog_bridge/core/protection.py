@@ -9,7 +9,7 @@ gives no stroke, and repeated heating without cooling degrades the shape-memory 
   the new pulse (the mean heating power the limb can shed).
 
 How the defaults follow from the measured curvature profiles is documented in the
-package README section "Serial bridge (frog_bridge)" and in :data:`DEFAULTS`.
+package README (frog_bridge/README.md, "Limb protection") and in :data:`DEFAULTS`.
 """
 
 from __future__ import annotations
