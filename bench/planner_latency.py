@@ -22,13 +22,13 @@ import sys
 import time
 
 import numpy as np
-
+from frog_common.primitives import PRIMITIVE_NAMES
 from frog_planner.core.paths import ellipse_path
 from frog_planner.core.planner import PAPER_COST, Planner
 from frog_planner.core.transition_model import TransitionModel
 
 N_STATES = 8503          # paper: 8503 simulations per action
-NAMES = list("ABCDEFGHI")
+NAMES = list(PRIMITIVE_NAMES)
 PERIOD = 1.5             # s
 
 

@@ -36,7 +36,7 @@ import numpy as np
 
 from frog_sim.core.actuation import ActuationLibrary
 from frog_sim.core.rollouts import Rollouts
-from frog_sim.core.schedules import LIMB_NAMES, PRIMITIVE_NAMES
+from frog_common.primitives import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import FrogSimulation
 
 PERIOD = 1.43            # s, the hardware's decision period

@@ -54,10 +54,10 @@ def main():
     to_big = np.array([[2, 0, 0.5], [0, 2, 0.5], [0, 0, 1.0]])
 
     def baseline(i):
-        from frog_vision.core.renderer import integrate_twist
+        from frog_common.se2 import twist_arc
         acc = np.zeros((960, 1280, 3), np.float32)
         for tau in np.linspace(-0.005, 0.005, 5):
-            p = integrate_twist(tr.pose[i], tr.twist[i], tau)
+            p = twist_arc(tr.pose[i], tr.twist[i], tau)
             layer = big_bg.copy()
             c, s = np.cos(p[2]), np.sin(p[2])
             H = to_big @ base_r._Htag @ np.array([[c, -s, p[0]], [s, c, p[1]], [0, 0, 1.0]]) @ base_r._tag_affine

@@ -2,9 +2,10 @@
 
 - every Python package has package.xml (format 3, ament_python), setup.cfg installing
   scripts into lib/<pkg>, the ament resource marker, a core/ and a nodes/ subpackage;
-- core modules import neither rclpy nor another package of ours (cores meet only through
-  messages and files; the composition package frog_twin is the one exception), checked
-  statically and by importing them with rclpy blocked;
+- core modules import neither rclpy nor another package of ours but the shared vocabulary
+  frog_common (cores meet only through messages and files; the composition package frog_twin
+  is the one exception), checked statically and by importing them with rclpy blocked;
+- frog_common imports no ROS and nothing of ours (numpy and the standard library only);
 - every console script is installed where `ros2 run` looks and its function exists;
 - every ROS package or third-party library a package's code imports is in its package.xml
   (a rosdep key, or a ``pip-only`` comment naming it where rosdep has none).
@@ -25,8 +26,9 @@ SRC = Path(__file__).resolve().parents[1] / "ros_ws" / "src"
 INSTALL = SRC.parent / "install"
 COMMON = "soft_robot_common"   # node plumbing shared by all nodes; no core, no algorithms
 COMPOSITION = "frog_twin"      # the one package whose core may use other packages' cores
+VOCABULARY = "frog_common"     # what every frog package shares (primitives, SE(2), file schema)
 ALL_PY = sorted(p.name for p in SRC.iterdir() if (p / "setup.py").is_file())
-PY_PACKAGES = [p for p in ALL_PY if p != COMMON]
+PY_PACKAGES = [p for p in ALL_PY if p not in (COMMON, VOCABULARY)]
 OURS = set(ALL_PY) | {"soft_robot_interfaces"}
 
 
@@ -35,12 +37,20 @@ def test_expected_packages_exist():
                                 "softkin_fk", "frog_logger", COMPOSITION}
     assert (SRC / "soft_robot_interfaces" / "CMakeLists.txt").is_file()
     assert (SRC / COMMON / "setup.py").is_file()
+    assert (SRC / VOCABULARY / "setup.py").is_file()
 
 
 def test_common_package_is_only_plumbing():
     """soft_robot_common may import ROS and the standard library, nothing of ours."""
     for path in (SRC / COMMON / COMMON).rglob("*.py"):
         assert not (_imports(path) & (OURS - {COMMON})), path
+
+
+def test_vocabulary_is_pure():
+    """frog_common: numpy and the standard library only, so every core may use it."""
+    for path in (SRC / VOCABULARY / VOCABULARY).rglob("*.py"):
+        names = _imports(path) - {VOCABULARY}
+        assert names <= set(sys.stdlib_module_names) | {"numpy"}, (path, names)
 
 
 @pytest.mark.parametrize("pkg", PY_PACKAGES)
@@ -80,7 +90,7 @@ def test_core_imports_no_ros_and_no_other_package(pkg):
         names = _imports(path)
         ros = {n for n in names if n in ("rclpy", "rosidl_runtime_py", "rosbag2_py")
                or n.endswith("_msgs") or n.endswith("_srvs")}
-        others = (names & OURS) - {pkg} if pkg != COMPOSITION else set()
+        others = (names & OURS) - {pkg, VOCABULARY} if pkg != COMPOSITION else set()
         if ros or others:
             bad[str(path.relative_to(SRC))] = sorted(ros | others)
     assert not bad, f"core modules importing ROS or another package's code: {bad}"
@@ -172,7 +182,7 @@ def test_no_package_but_the_composition_imports_another_packages_code(pkg):
     """Nodes, tools and cores of a package stand alone (they meet through messages and files)."""
     bad = {}
     for path in (SRC / pkg / pkg).rglob("*.py"):
-        others = (_imports(path) & (OURS - {"soft_robot_interfaces", COMMON})) - {pkg}
+        others = (_imports(path) & (OURS - {"soft_robot_interfaces", COMMON, VOCABULARY})) - {pkg}
         if others:
             bad[str(path.relative_to(SRC))] = sorted(others)
     assert not bad, f"imports of another package's code outside {COMPOSITION}: {bad}"

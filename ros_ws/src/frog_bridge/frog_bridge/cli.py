@@ -12,7 +12,7 @@ import argparse
 import sys
 import time
 
-from frog_bridge.core.limbs import LIMB_IDS, PRIMITIVE_NAMES, limb_names
+from frog_common.primitives import LIMB_IDS, PRIMITIVE_NAMES, limb_label
 
 EPILOG = """examples:
   frog-bridge primitive B                 all four limbs (front, then rear one pulse later)
@@ -89,7 +89,7 @@ def main(argv=None) -> int:
         else:
             pub = node.create_publisher(LimbActivation, "frog/limb_command", qos)
             msg = LimbActivation(limbs=args.limbs, pulse_duration=0.0)
-            what = f"limbs {limb_names(args.limbs)}"
+            what = f"limbs {limb_label(args.limbs)}"
         while pub.get_subscription_count() == 0 and time.monotonic() < end:
             rclpy.spin_once(node, timeout_sec=0.05)
         if pub.get_subscription_count() == 0:

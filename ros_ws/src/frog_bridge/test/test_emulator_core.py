@@ -1,11 +1,10 @@
 """The emulated relay and robot: firmware parsing, BLE delay model."""
 
-import math
 
 import numpy as np
 import pytest
 
-from frog_bridge.core.emulator import BleLinkModel, Fire, RobotFirmware, quaternion_yaw, yaw_quaternion
+from frog_bridge.core.emulator import BleLinkModel, Fire, RobotFirmware
 from frog_bridge.core.protocol import DecodeError, SetPulse
 
 
@@ -34,8 +33,3 @@ def test_ble_delay_is_bounded_ordered_and_lossy():
         BleLinkModel(loss_rate=1.5)
 
 
-def test_yaw_quaternion_round_trip():
-    for yaw in np.linspace(-3.1, 3.1, 13):
-        assert quaternion_yaw(*yaw_quaternion(yaw)) == pytest.approx(yaw, abs=1e-12)
-    w, x, y, z = yaw_quaternion(math.pi / 2)
-    assert (w, z) == pytest.approx((math.sqrt(0.5), math.sqrt(0.5)))

@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from frog_bridge.core.limbs import PRIMITIVE_NAMES, primitive_pairs
+from frog_bridge.core.limbs import primitive_pairs
+from frog_common.primitives import PRIMITIVE_NAMES
 from frog_bridge.core.protocol import (
     Blank, DecodeError, Emergency, ErrorKind, Heat, LineFramer, Quaternion, RelayText, SetPulse,
     decode_command, decode_relay_line, encode_emergency, encode_heat, encode_quaternion,

@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from frog_planner.core.library_file import LibraryFormatError, load_motion_library
+from frog_common.motion_library_file import LibraryFormatError, load_motion_library
 
 
 @pytest.fixture

@@ -246,7 +246,9 @@ def cmd_gait(args):
 
 
 def cmd_primitives(args):
-    from .core.schedules import ActivationSchedule, primitive_name
+    from frog_common.primitives import primitive_name
+
+    from .core.schedules import ActivationSchedule
     items = [s.strip() for s in args.sequence.split(',') if s.strip()]
     if not items:
         raise CliError('--sequence is empty; give e.g. A,B,C or 0,1,2')

@@ -34,6 +34,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+from frog_common.primitives import PRIMITIVE_NAMES
 
 from .core import hardware_runs as hr
 from .core.actuation import ActuationLibrary, find_data_file
@@ -536,7 +537,7 @@ def plot_report(rep: FidelityReport, out: Path) -> list[Path]:
     out = Path(out)
     files = []
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
-    colors = dict(zip('ABCDEFGHI', plt.get_cmap('tab10').colors))
+    colors = dict(zip(PRIMITIVE_NAMES, plt.get_cmap('tab10').colors))
     for ax, (q, scale, unit) in zip(axes, (('dx', 1e3, 'mm'), ('dy', 1e3, 'mm'), ('dheading', np.degrees(1.0), 'deg'))):
         lim = 0.0
         for p in sorted({pr['real']['primitive'] for pr in rep.pairs}):

@@ -41,13 +41,13 @@ def cmd_generate(args) -> int:
 
 
 def cmd_info(args) -> int:
-    from frog_sim.core.motion_library import load_library
-    lib = load_library(args.file)
-    meta = lib["metadata"]
-    p, n, t, _ = lib["transitions"].shape
-    conv = lib["converged"]
+    from frog_common.motion_library_file import load_motion_library
+    lib = load_motion_library(args.file)
+    meta = lib.metadata
+    p, n, t, _ = lib.transitions.shape
+    conv = lib.converged
     print(f"file:        {args.file}")
-    print(f"primitives:  {p} ({' '.join(str(x) for x in lib['primitive_names'])})")
+    print(f"primitives:  {p} ({' '.join(str(x) for x in lib.primitive_names)})")
     print(f"states:      {n}   transitions: {p * n}   failed: {int((~conv).sum())}   simulated: "
           f"{meta['sampling'].get('simulated_transitions', p * n)} (mirror pairs: "
           f"{meta['sampling'].get('mirror_pairs', False)})")
@@ -60,9 +60,9 @@ def cmd_info(args) -> int:
     if "generation_wall_time_s" in meta:
         rate = p * n / meta["generation_wall_time_s"]
         print(f"generation:  {meta['generation_wall_time_s']:.1f} s wall ({rate:.1f} transitions/s)")
-    final = lib["transitions"][:, :, -1, :]
+    final = lib.transitions[:, :, -1, :]
     print("mean final displacement per primitive (x forward, y left) [cm] and heading [deg]:")
-    for k, name in enumerate(lib["primitive_names"]):
+    for k, name in enumerate(lib.primitive_names):
         f = final[k][conv[k]]
         print(f"  {name}: x {100 * f[:, 0].mean():6.2f}  y {100 * f[:, 1].mean():6.2f}  "
               f"heading {np.degrees(f[:, 2]).mean():7.2f}")
@@ -75,22 +75,22 @@ def plot_transitions(path, png, period: float = 1.5, n_sample: int = 1000, seed:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from frog_sim.core.motion_library import load_library
-    lib = load_library(path)
-    times = lib["times"]
+    from frog_common.motion_library_file import load_motion_library
+    lib = load_motion_library(path)
+    times = lib.times
     k = int(np.argmin(np.abs(times - period)))
-    p, n = lib["converged"].shape
+    p, n = lib.converged.shape
     rng = np.random.default_rng(seed)
-    pairs = np.argwhere(lib["converged"])
+    pairs = np.argwhere(lib.converged)
     pick = pairs[rng.choice(len(pairs), size=min(n_sample, len(pairs)), replace=False)]
     fig, ax = plt.subplots(figsize=(7.5, 7))
     cmap = plt.get_cmap("tab10")
     for prim in range(p):
         sel = pick[pick[:, 0] == prim]
-        st = lib["transitions"][sel[:, 0], sel[:, 1], k]
+        st = lib.transitions[sel[:, 0], sel[:, 1], k]
         ax.quiver(100 * st[:, 0], 100 * st[:, 1], np.cos(st[:, 2]), np.sin(st[:, 2]),
                   color=cmap(prim), angles="xy", scale=40, width=0.003,
-                  label=str(lib["primitive_names"][prim]))
+                  label=str(lib.primitive_names[prim]))
     ax.plot(0, 0, "k+", ms=14)
     ax.set_aspect("equal")
     ax.set_xlabel("x [cm] (start body frame, forward)")
@@ -145,11 +145,11 @@ def build_parser():
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     from frog_sim.core.batch import BatchError
-    from frog_sim.core.motion_library import LibraryFileError
+    from frog_common.motion_library_file import LibraryFormatError
     from frog_sim.cli import CliError
     try:
         return args.func(args)
-    except (LibraryFileError, BatchError, ValueError, OSError, CliError) as exc:
+    except (LibraryFormatError, BatchError, ValueError, OSError, CliError) as exc:
         print(f"frog-library: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

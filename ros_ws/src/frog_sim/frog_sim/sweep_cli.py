@@ -27,8 +27,8 @@ Interrupted runs resume from <out>/chunks when rerun with the same arguments.
 
 def _meta(args, extra: dict) -> dict:
     from frog_sim.core.model_parameters import FrogParameters
-    from frog_sim.core.motion_library import code_version
-    return {"created": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "code_version": code_version(),
+    from frog_common.version import code_version
+    return {"created": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "code_version": code_version("frog_sim"),
             "arguments": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()
                           if k != "func"},
             "robot_defaults": FrogParameters().as_dict(), **extra}

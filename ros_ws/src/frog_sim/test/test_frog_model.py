@@ -8,7 +8,8 @@ from frog_sim.core.model_parameters import FrogParameters, parameter_table
 from frog_sim.core.rigid_body import (center_of_mass, heading_angle, nodal_velocities,
                                       rigid_body_state, yaw_rate)
 from frog_sim.core.rod_network import discrete_curvature
-from frog_sim.core.schedules import ActivationSchedule, primitive_limbs, primitive_name
+from frog_common.primitives import primitive_limbs, primitive_name
+from frog_sim.core.schedules import ActivationSchedule
 from frog_sim.core.simulation import FrogSimulation
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from frog_sim.core.rod_network import discrete_curvature
 from frog_sim.core.rollouts import Rollouts
-from frog_sim.core.schedules import LIMB_NAMES
+from frog_common.primitives import LIMB_NAMES
 from frog_sim.core.simulation import FrogSimulation
 
 PERIOD = 1.43

@@ -75,7 +75,7 @@ def main(argv=None) -> int:
                                                   k_neighbours=args.settings.k_neighbours)
     except ValueError as exc:
         ap.error(str(exc))
-    from frog_planner.core.library_file import LibraryFormatError
+    from frog_common.motion_library_file import LibraryFormatError
     paths = ["line", "sine", "ellipse"] if args.path == "all" or args.compare else [args.path]
     if args.compare and args.transitions == "simulator":
         runs = [(p, d, args.settings.metric) for d in (1, 2) for p in paths]

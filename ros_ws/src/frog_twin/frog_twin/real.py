@@ -34,6 +34,7 @@ from soft_robot_common.graph import load_graph
 
 from frog_twin.core import twin_report
 from frog_twin.core.twin_recording import read_twin_recording
+from frog_common.se2 import yaw_of
 
 #: What the pre-flight waits for at most per check [s].
 PREFLIGHT_TIMEOUT_S = 20.0
@@ -132,7 +133,7 @@ class RealWatch:
 
     def _on_pose(self, msg) -> None:
         q = msg.pose.orientation
-        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        yaw = yaw_of(q)
         self.poses.append((time.monotonic(), msg.pose.position.x, msg.pose.position.y, yaw))
 
     def _on_imu(self, msg) -> None:

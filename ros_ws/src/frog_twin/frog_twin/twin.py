@@ -137,9 +137,9 @@ def ensure_library(path: Path, states: int, horizon: float = 3.0) -> Path:
 def _library_model_differs(path: Path) -> str:
     """'' if the library's robot model is today's default, else the first differing parameter."""
     from frog_sim.core.model_parameters import FrogParameters
-    from frog_sim.core.motion_library import load_library
+    from frog_common.motion_library_file import load_motion_library
     try:
-        robot = load_library(path)["metadata"].get("robot", {})
+        robot = load_motion_library(path).metadata.get("robot", {})
     except Exception as exc:      # unreadable: regenerate rather than fail the run
         return f"unreadable: {exc}"
     for name, value in FrogParameters().as_dict().items():

@@ -52,7 +52,7 @@ def test_residual_autocovariance_matches_the_robot(windows):
 
 def test_b_heading_wander_matches_the_robot(windows):
     from frog_sim import multi_period as mp
-    from frog_sim.core.schedules import LIMB_NAMES
+    from frog_common.primitives import LIMB_NAMES
     from frog_sim.core.simulation import FrogSimulation
     b = [w for w in windows if w.primitives[0] == "B"]
     assert len(b) >= 15

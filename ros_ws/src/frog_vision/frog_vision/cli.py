@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from frog_common.se2 import yaw_of
 
 EXAMPLES = """examples:
   # camera pose over the tank from photos of the board (tag36h11, default layout)
@@ -292,7 +293,7 @@ def _read_swim(path: Path):
         for m in messages:
             q = m.pose.orientation
             rows.append([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, m.pose.position.x, m.pose.position.y,
-                         math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))])
+                         yaw_of(q)])
         if not rows:
             raise UsageError(f"{path}: no /frog/pose messages (record the tracker's pose)")
         a = np.array(sorted(rows))

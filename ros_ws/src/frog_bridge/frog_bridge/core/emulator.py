@@ -88,13 +88,3 @@ class RobotFirmware:
         if isinstance(cmd, Heat):
             return Fire(cmd.limbs, self.pulse_ms / 1000.0)
         return cmd
-
-
-def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
-    """(w, x, y, z) of a rotation by ``yaw`` [rad] about z (REP-103: z up)."""
-    return math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)
-
-
-def quaternion_yaw(w: float, x: float, y: float, z: float) -> float:
-    """Yaw [rad] of a unit quaternion (ZYX convention)."""
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

@@ -1,25 +1,17 @@
-"""Limb ids and the nine motion primitives of the frog (DESIGN.md, seed 000 "Motion planning").
+"""The order in which the bridge writes a primitive's limbs (the table is frog_common's).
 
-Limb ids are the robot firmware's: FL 0, FR 1, BL 2, BR 3. A primitive's bits are
-[FR, FL, BL, BR]; the front pair fires first, the rear pair one pulse later.
+The authors' executor writes each pulse's limb ids in the primitive's bit order, FR before
+FL and BL before BR; the relay and firmware accept either, but the bridge sends what the
+robot was run with.
 """
 
 from __future__ import annotations
 
-LIMB_IDS = {"FL": 0, "FR": 1, "BL": 2, "BR": 3}
-LIMB_NAMES = {v: k for k, v in LIMB_IDS.items()}
-FRONT_LIMBS = (LIMB_IDS["FR"], LIMB_IDS["FL"])
-REAR_LIMBS = (LIMB_IDS["BL"], LIMB_IDS["BR"])
-
-PRIMITIVE_NAMES = "ABCDEFGHI"
-# bits [FR, FL, BL, BR] from the authors' control code
-PRIMITIVE_BITS = {"A": "1100", "B": "1111", "C": "0111", "D": "1011", "E": "0110",
-                  "F": "1001", "G": "0100", "H": "1000", "I": "0000"}
-_BIT_LIMBS = (LIMB_IDS["FR"], LIMB_IDS["FL"], LIMB_IDS["BL"], LIMB_IDS["BR"])
+from frog_common.primitives import LIMB_IDS, PRIMITIVE_BIT_ORDER, PRIMITIVE_NAMES, primitive_limbs
 
 
 def primitive_pairs(primitive_id: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
-    """Limb ids of the front and rear pulses of a primitive.
+    """Limb ids of the front and rear pulses of a primitive, in the authors' write order.
 
     Parameters
     ----------
@@ -29,8 +21,7 @@ def primitive_pairs(primitive_id: int) -> tuple[tuple[int, ...], tuple[int, ...]
     Returns
     -------
     (front, rear) : tuple of tuple of int
-        Limb ids in the order the authors' code writes them (FR before FL, BL before BR);
-        an empty tuple means that pair sends nothing.
+        An empty tuple means that pair sends nothing.
 
     Raises
     ------
@@ -44,11 +35,5 @@ def primitive_pairs(primitive_id: int) -> tuple[tuple[int, ...], tuple[int, ...]
     """
     if not (isinstance(primitive_id, int) and 0 <= primitive_id < len(PRIMITIVE_NAMES)):
         raise ValueError(f"primitive id {primitive_id!r} is out of range 0-8")
-    bits = PRIMITIVE_BITS[PRIMITIVE_NAMES[primitive_id]]
-    on = [limb for bit, limb in zip(bits, _BIT_LIMBS) if bit == "1"]
-    return tuple(i for i in on if i in FRONT_LIMBS), tuple(i for i in on if i in REAR_LIMBS)
-
-
-def limb_names(limbs) -> str:
-    """``"FR+FL"`` style label of limb ids (``"none"`` when empty)."""
-    return "+".join(LIMB_NAMES.get(i, f"?{i}") for i in limbs) or "none"
+    front, rear = primitive_limbs(primitive_id)
+    return tuple(tuple(LIMB_IDS[n] for n in sorted(pair, key=PRIMITIVE_BIT_ORDER.index)) for pair in (front, rear))

@@ -19,7 +19,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-from .limbs import LIMB_NAMES
+from frog_common.primitives import LIMB_NAMES
 
 _EPS = 1e-9
 
@@ -76,7 +76,7 @@ class LimbGuard:
         if problem:
             raise ValueError(problem)
         self.config = config
-        self._history: dict[int, deque[tuple[float, float]]] = {i: deque() for i in LIMB_NAMES}
+        self._history: dict[int, deque[tuple[float, float]]] = {i: deque() for i in range(len(LIMB_NAMES))}
 
     def last_start(self, limb: int) -> float | None:
         h = self._history[limb]

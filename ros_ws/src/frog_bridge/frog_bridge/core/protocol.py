@@ -27,7 +27,7 @@ import math
 import re
 from dataclasses import dataclass
 
-from .limbs import LIMB_NAMES
+from frog_common.primitives import LIMB_NAMES
 
 RELAY_PREFIX = "Central: "          # 9 characters; the payload starts at index 9
 QUATERNION_ORDERS = ("wxyz", "xyzw")
@@ -132,7 +132,7 @@ def encode_heat(limbs) -> bytes:
         For an empty list, repeated ids or an id outside 0-3.
     """
     limbs = tuple(limbs)
-    if not limbs or len(set(limbs)) != len(limbs) or any(i not in LIMB_NAMES for i in limbs):
+    if not limbs or len(set(limbs)) != len(limbs) or any(i not in range(len(LIMB_NAMES)) for i in limbs):
         raise ValueError(f"limb ids {list(limbs)} must be distinct, in 0-3, at least one")
     return ("h " + " ".join(str(i) for i in limbs) + "\n").encode("ascii")
 

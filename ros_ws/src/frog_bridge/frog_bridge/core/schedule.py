@@ -19,7 +19,9 @@ import math
 from collections import Counter
 from dataclasses import dataclass, field
 
-from .limbs import PRIMITIVE_NAMES, limb_names, primitive_pairs
+from frog_common.primitives import PRIMITIVE_NAMES, limb_label
+
+from .limbs import primitive_pairs
 from .protection import LimbGuard, PlannedPulse
 
 # Reasons a command or pulse is not written (counter keys, also in diagnostics).
@@ -141,10 +143,10 @@ class CommandScheduler:
                                                  f"at least one (FL 0, FR 1, BL 2, BR 3)")
         problem = self._age_problem(stamp, now)
         if problem:
-            return self._refuse(REFUSED_STALE, f"limb command {limb_names(limbs)}: {problem}")
+            return self._refuse(REFUSED_STALE, f"limb command {limb_label(limbs)}: {problem}")
         cid = next(self._ids)
-        pulse = TimedPulse(now, limbs, self.pulse_s, f"limbs {limb_names(limbs)}", cid)
-        return self._schedule([pulse], f"limb command {limb_names(limbs)}")
+        pulse = TimedPulse(now, limbs, self.pulse_s, f"limbs {limb_label(limbs)}", cid)
+        return self._schedule([pulse], f"limb command {limb_label(limbs)}")
 
     def _refuse(self, key: str, reason: str) -> Decision:
         self.counts[key] += 1

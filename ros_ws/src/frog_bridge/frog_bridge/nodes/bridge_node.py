@@ -33,7 +33,7 @@ from soft_robot_common import ConfigurationError, MessageGate, Param, declare_pa
 from std_msgs.msg import Empty
 from std_srvs.srv import Trigger
 
-from frog_bridge.core.limbs import PRIMITIVE_NAMES, limb_names
+from frog_common.primitives import PRIMITIVE_NAMES, limb_label
 from frog_bridge.core.link import LinkState, LinkSupervisor
 from frog_bridge.core.protection import DEFAULTS, LimbGuard, ProtectionConfig
 from frog_bridge.core.protocol import (
@@ -196,7 +196,7 @@ class BridgeNode(Node):
             return
         limbs = list(msg.limbs)
         self._check_watchdog()          # a silent planner's pulses go before this command is queued
-        if not self._link_allows(f"limb command {limb_names(limbs)}"):
+        if not self._link_allows(f"limb command {limb_label(limbs)}"):
             return
         self._decided(self.scheduler.submit_limbs(limbs, _stamp_s(msg.header.stamp), self._now(),
                                                   msg.pulse_duration), t_in)

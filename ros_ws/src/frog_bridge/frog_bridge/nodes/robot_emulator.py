@@ -34,11 +34,12 @@ from soft_robot_common import (ConfigurationError, MessageGate, NodeDiagnostics,
 from std_srvs.srv import Trigger
 
 from frog_bridge.core.emulator import (
-    DEFAULT_BLE_INTERVAL_S, DEFAULT_BLE_LATENCY_S, BleLinkModel, Fire, RobotFirmware, quaternion_yaw, yaw_quaternion)
-from frog_bridge.core.limbs import limb_names
+    DEFAULT_BLE_INTERVAL_S, DEFAULT_BLE_LATENCY_S, BleLinkModel, Fire, RobotFirmware)
+from frog_common.primitives import limb_label
 from frog_bridge.core.protocol import (
     QUATERNION_ORDERS, DecodeError, LineFramer, SetPulse, encode_emergency, encode_quaternion, excerpt)
 from frog_bridge.core.pty_device import OpenedDevice, PtyDevice
+from frog_common.se2 import quaternion_yaw, yaw_quaternion
 
 PARAMS = [
     Param("link_path", "/tmp/frog_robot_tty", "stable path linked to the emulated device (the bridge's port); "
@@ -233,7 +234,7 @@ class RobotEmulator(Node):
             self.get_logger().warn(f"line {excerpt(line)} lost over BLE")
             self._record(t_rx, line, "lost over BLE")
             return
-        self._record(t_rx, line, f"fire {limb_names(fire.limbs)} at +{(t_fire - t_rx) * 1e3:.1f} ms")
+        self._record(t_rx, line, f"fire {limb_label(fire.limbs)} at +{(t_fire - t_rx) * 1e3:.1f} ms")
         delay = t_fire - time.time()
         timer = None
 
@@ -249,7 +250,7 @@ class RobotEmulator(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         self.fired_pub.publish(msg)
         self.counts["fired"] += 1
-        self.get_logger().debug(f"fired {limb_names(fire.limbs)} for {fire.pulse_s * 1e3:g} ms")
+        self.get_logger().debug(f"fired {limb_label(fire.limbs)} for {fire.pulse_s * 1e3:g} ms")
 
     def on_odom(self, msg: Odometry) -> None:
         problem = self.gate.problem(msg, stamped=False)    # only the heading is used: any stamp will do
@@ -267,7 +268,8 @@ class RobotEmulator(Node):
     def write_imu(self) -> None:
         if self.yaw is None or time.monotonic() < self.stalled_until:
             return
-        self.device.write(encode_quaternion(*yaw_quaternion(self.yaw), order=self.cfg["quaternion_order"]))
+        x, y, z, w = yaw_quaternion(self.yaw)
+        self.device.write(encode_quaternion(w, x, y, z, order=self.cfg["quaternion_order"]))
 
     # -- faults -------------------------------------------------------------------------------
     def on_emergency(self, request, response):

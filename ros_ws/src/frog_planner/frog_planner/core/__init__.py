@@ -1,24 +1,22 @@
 """Pure-Python core of frog_planner: no rclpy imports, unit-tested without ROS.
 
-Modules: ``library_file`` (read/validate the motion library), ``transition_model``
-(nearest-neighbour transitions), ``prediction`` (eq. 18), ``tree_search`` (eq. 19, Algorithm 1),
+Modules: ``transition_model`` (nearest-neighbour transitions of the motion library, which
+``frog_common.motion_library_file`` reads), ``prediction`` (eq. 18), ``tree_search`` (eq. 19, Algorithm 1),
 ``paths`` (eq. 15-17, waypoints) and ``planner`` (one decision per period).
 """
 
-from .library_file import LibraryFormatError, MotionLibrary, load_motion_library
 from .paths import (Path, ellipse_path, line_path, parametric_path, path_from_spec, sinusoid_path,
                     waypoint_path_from_csv)
 from .planner import CostTerms, Decision, Planner
 from .prediction import apply_transition, predict_world_state
-from .transition_model import TransitionModel, body_to_world_velocity, world_to_body_velocity
+from .transition_model import TransitionModel
 from .tree_search import CostWeights, PathCost, SearchResult, path_cost, search
 
 __all__ = [
-    "LibraryFormatError", "MotionLibrary", "load_motion_library",
     "Path", "ellipse_path", "line_path", "parametric_path", "path_from_spec", "sinusoid_path",
     "waypoint_path_from_csv",
     "CostTerms", "Decision", "Planner",
     "apply_transition", "predict_world_state",
-    "TransitionModel", "body_to_world_velocity", "world_to_body_velocity",
+    "TransitionModel",
     "CostWeights", "PathCost", "SearchResult", "path_cost", "search",
 ]

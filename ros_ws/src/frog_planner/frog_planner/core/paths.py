@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from frog_common.se2 import wrap_angle
 
 PAPER_N_POINTS = 100  # "100 evenly spaced points in [0, 1]"
 LINE_LENGTH_M = 0.466
@@ -33,22 +34,6 @@ ELLIPSE_S_F = 1.0 / 0.95
 
 _DENSE_SAMPLES = 4001  # samples of a parametric curve before arc-length resampling
 _PROJECT_CHUNK = 4096  # positions per block when projecting (bounds memory at depth 4-5)
-
-
-def wrap_angle(angle):
-    """Wrap angles to [-pi, pi).
-
-    Parameters
-    ----------
-    angle : array_like
-        Angles in rad, any shape.
-
-    Returns
-    -------
-    numpy.ndarray or float
-        Same shape, wrapped to [-pi, pi).
-    """
-    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def resample_by_arc_length(points, n_points=PAPER_N_POINTS):

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .settings import PlannerSettings
-from .transition_model import world_to_body_velocity
 from .tree_search import MAX_DEPTH, CostWeights, path_cost, search
+from frog_common.se2 import world_to_body
 
 
 @dataclass(frozen=True)
@@ -281,5 +281,5 @@ class Planner:
         s = np.asarray(state, dtype=float).reshape(-1)
         if s.shape != (6,):
             raise ValueError(f"state has {s.size} values; expected 6 (x, y, theta, x_dot, y_dot, theta_dot)")
-        body = world_to_body_velocity(s[2], s[3:5])
+        body = world_to_body(s[2], s[3:5])
         return self.decide(s[:3], [body[0], body[1], s[5]])

@@ -12,8 +12,7 @@ at the end (forward, lateral m/s, yaw rate rad/s) in the body frame at that time
 """
 
 import numpy as np
-
-from .paths import wrap_angle
+from frog_common.se2 import wrap_angle
 
 
 def apply_transition(pose, transition):

@@ -27,7 +27,7 @@ import itertools
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .library_file import load_motion_library
+from frog_common.motion_library_file import load_motion_library
 
 METRICS = ("euclidean", "relative")
 LOOKUPS = ("si", "authors_code")
@@ -36,35 +36,6 @@ LOOKUPS = ("si", "authors_code")
 AUTHORS_LOOKUP = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 180.0 / np.pi]])
 _RELATIVE_PROBES = 7       # extra Euclidean neighbours probed to bound the relative distance
 _RELATIVE_MAX_BALL = 0.3   # scaled radius above which a query is ranked against all states
-
-
-def world_to_body_velocity(heading, world_velocity):
-    """Rotate world-frame planar velocities into the body frame (Algorithm 1 step 5: R(-theta)).
-
-    Parameters
-    ----------
-    heading : float or array_like, shape (...)
-        Body heading theta in rad (world frame).
-    world_velocity : array_like, shape (..., 2)
-        (x_dot, y_dot) in m/s, world frame.
-
-    Returns
-    -------
-    numpy.ndarray, shape (..., 2)
-        (forward, lateral) velocity in m/s.
-    """
-    th = np.asarray(heading, dtype=float)
-    v = np.asarray(world_velocity, dtype=float)
-    c, s = np.cos(th), np.sin(th)
-    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
-
-
-def body_to_world_velocity(heading, body_velocity):
-    """Rotate body-frame planar velocities into the world frame (R(theta)); inverse of the above."""
-    th = np.asarray(heading, dtype=float)
-    v = np.asarray(body_velocity, dtype=float)
-    c, s = np.cos(th), np.sin(th)
-    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
 
 
 class TransitionModel:

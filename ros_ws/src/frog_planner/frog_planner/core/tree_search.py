@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .paths import wrap_angle
 from .prediction import apply_transition
+from frog_common.se2 import twist_arc, wrap_angle
 
 MAX_DEPTH = 5
 
@@ -256,22 +256,11 @@ def extrapolate_poses(poses, body_velocities, horizon):
         Heading wrapped to [-pi, pi).
     """
     p = np.atleast_2d(np.asarray(poses, dtype=float))
-    v = np.atleast_2d(np.asarray(body_velocities, dtype=float))
-    tau = float(horizon)
-    if tau == 0.0:
+    if float(horizon) == 0.0:
         return p.copy()
-    u, w, r = v[:, 0], v[:, 1], v[:, 2]
-    a = r * tau
-    small = np.abs(a) < 1e-6
-    a_safe = np.where(small, 1.0, a)
-    # integral_0^tau of R(r t) dt, divided by tau: [[sin a / a, -(1 - cos a) / a], [(1 - cos a) / a, sin a / a]]
-    sa = np.where(small, 1.0 - a * a / 6.0, np.sin(a_safe) / a_safe)
-    ca = np.where(small, a / 2.0, (1.0 - np.cos(a_safe)) / a_safe)
-    dx_body = tau * (sa * u - ca * w)
-    dy_body = tau * (ca * u + sa * w)
-    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
-    return np.column_stack([p[:, 0] + c * dx_body - s * dy_body, p[:, 1] + s * dx_body + c * dy_body,
-                            wrap_angle(p[:, 2] + a)])
+    out = twist_arc(p, np.atleast_2d(np.asarray(body_velocities, dtype=float)), float(horizon))
+    out[:, 2] = wrap_angle(out[:, 2])
+    return out
 
 
 def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), previous_progress=0.0,

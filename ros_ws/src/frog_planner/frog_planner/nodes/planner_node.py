@@ -55,12 +55,14 @@ from std_msgs.msg import Empty
 from std_srvs.srv import Trigger
 
 from frog_planner.core.feasibility import radius_ahead, steady_turns, tight_stretches, turning_limits
-from frog_planner.core.library_file import LibraryFormatError
+from frog_common.motion_library_file import LibraryFormatError
 from frog_planner.core.planner import Planner
 from frog_planner.core.settings import PathSettings, PlannerSettings
 from frog_planner.core.state_window import StateWindow
 from frog_planner.core.transition_model import TransitionModel
 from frog_planner.nodes.rollout_client import RolloutClient, lead_time
+from frog_common.primitives import NO_ACTION
+from frog_common.se2 import set_yaw, yaw_of
 
 TRANSITIONS = ("library", "simulator")
 SIMULATOR_MAX_DEPTH = 2
@@ -99,11 +101,6 @@ _PLANNER_PARAMS = params_from_dataclass(PlannerSettings)
 _PATH_PARAMS = params_from_dataclass(PathSettings)
 _PLANNER_FIELDS = {r.name for r in _PLANNER_PARAMS}
 _PATH_FIELDS = {r.name for r in _PATH_PARAMS}
-
-
-def yaw_of(q) -> float:
-    """Yaw [rad] of a geometry_msgs quaternion (rotation about z)."""
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 def _settings(cls, values: dict, fields: set):
@@ -272,7 +269,7 @@ class PlannerNode(Node):
             ps = PoseStamped()
             ps.header = msg.header
             ps.pose.position.x, ps.pose.position.y = float(x), float(y)
-            ps.pose.orientation.z, ps.pose.orientation.w = math.sin(h / 2), math.cos(h / 2)
+            set_yaw(ps.pose.orientation, float(h))
             msg.poses.append(ps)
         self.path_pub.publish(msg)
         # under use_sim_time the clock reads 0 until /clock arrives: publish again once it runs
@@ -454,7 +451,7 @@ class PlannerNode(Node):
             message = (f"goal reached (progress {d.progress:.3f}, {d.distance_to_path * 100:.2f} cm "
                        f"from the path)")
             self._log_state(S.STATE_GOAL_REACHED, message)
-            self._publish(8, "I", S.STATE_GOAL_REACHED, message, now=now)
+            self._publish(self._Primitive.ID_I, NO_ACTION, S.STATE_GOAL_REACHED, message, now=now)
             return
         self._log_state(S.STATE_FOLLOWING, f"following the {self.path.name} path")
         self.get_logger().debug(f"primitive {d.name}: cost {d.total_cost:.2f}, progress {d.progress:.3f}")
@@ -465,7 +462,7 @@ class PlannerNode(Node):
         if state == self._Status.STATE_WAITING:  # only odometry problems wait
             self.stale_decisions += 1           # a decision refused for a stale or missing pose
         self._log_state(state, reason)
-        self._publish(8, "I", state, reason)
+        self._publish(self._Primitive.ID_I, NO_ACTION, state, reason)
 
     # -- the paper's asynchronous loop (replan_interval > 0) -----------------------------------------
     def replan(self) -> None:

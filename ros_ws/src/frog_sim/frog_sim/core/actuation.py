@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 from scipy.optimize import curve_fit
+from frog_common.version import code_version
 
 FIT_VERSION = 1
 #: Package-data file of the shipped fit (relative to the ``frog_sim`` package).
@@ -108,15 +109,6 @@ def package_fit_path() -> Path:
     """Location of the shipped fit (``frog_sim/data/actuation_fit.json``)."""
     from importlib.resources import files
     return Path(str(files('frog_sim').joinpath(*PACKAGE_FIT_FILE)))
-
-
-def code_version() -> str:
-    """Installed ``frog_sim`` distribution version (or ``'unknown'``)."""
-    try:
-        from importlib.metadata import version
-        return version('frog_sim')
-    except Exception:  # pragma: no cover - not installed as a distribution
-        return 'unknown'
 
 
 def cache_dir() -> Path:
@@ -335,7 +327,7 @@ class ActuationLibrary:
         data = read_curvature_profiles(path)
         profiles = {key: fit_profile(t, k, *key) for key, (t, k) in sorted(data.items())}
         source = {'data_file': path.name, 'data_sha256': digest, 'fit_version': FIT_VERSION,
-                  'code_version': code_version(),
+                  'code_version': code_version('frog_sim'),
                   'created_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
                   'model': 'paper eq. 9 piecewise logistic, curve_fit per phase',
                   'units': {'coefficients': 'C1,C4 [1/m]; C2 [1/s]; C3 [s]',

@@ -21,7 +21,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 import zipfile
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from multiprocessing import get_context
@@ -29,8 +28,9 @@ from pathlib import Path
 from typing import Callable, Optional
 
 import numpy as np
+from frog_common.atomic_files import atomic_save_npz
 
-__all__ = ["BatchError", "run_chunked", "spec_hash", "chunk_ranges", "atomic_save_npz"]
+__all__ = ["BatchError", "run_chunked", "spec_hash", "chunk_ranges"]
 
 
 class BatchError(RuntimeError):
@@ -56,24 +56,6 @@ def chunk_ranges(n_items: int, chunk_size: int) -> list[tuple[int, int]]:
     if n_items < 0 or chunk_size < 1:
         raise BatchError(f"n_items = {n_items} must be >= 0 and chunk_size = {chunk_size} >= 1")
     return [(s, min(s + chunk_size, n_items)) for s in range(0, n_items, chunk_size)]
-
-
-def atomic_save_npz(path: Path, arrays: dict) -> None:
-    """Write an .npz so that ``path`` is either absent or complete (rename is atomic)."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
 
 
 def _load_chunk(path: Path) -> Optional[dict]:

@@ -38,7 +38,7 @@ from .fluid import lumped_masses
 from .model_parameters import FrogParameters
 from .rigid_body import center_of_mass
 from .rod_network import RodNetwork, RodNetworkBuilder
-from .schedules import LIMB_IDS, LIMB_NAMES
+from frog_common.primitives import LIMB_IDS, LIMB_NAMES
 
 BODY_GROUP = 0
 

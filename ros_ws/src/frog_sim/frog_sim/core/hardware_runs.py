@@ -35,6 +35,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+from frog_common import se2
+from frog_common.primitives import PRIMITIVE_NAMES
 
 #: Runs of ``hardware_runs/`` (README): two lines and four sinusoids.
 HARDWARE_RUNS = ('line1', 'line2', 'sin1', 'sin2', 'sin3', 'sin4')
@@ -116,7 +118,7 @@ def read_hardware_log(path: Path | str, min_frame_gap: float = 0.015) -> Hardwar
                 raise ValueError(f'{path}:{lineno}: expected Timestamp,x,y,theta,... numbers, '
                                  f'got {row[:4]!r}') from None
             act = row[-1].strip().upper()
-            if act not in tuple('ABCDEFGHI'):
+            if act not in PRIMITIVE_NAMES:
                 raise ValueError(f'{path}:{lineno}: last column {row[-1]!r} is not a primitive A-I')
             acts.append(act)
     if len(stamps) < 10:
@@ -321,9 +323,8 @@ class Transition:
 
 def relative_pose(p0: LocalPose, p1: LocalPose) -> tuple[float, float, float]:
     """(dx, dy) of ``p1`` in the body frame of ``p0`` and the heading change [m, m, rad]."""
-    c, s = np.cos(p0.heading), np.sin(p0.heading)
-    ex, ey = p1.x - p0.x, p1.y - p0.y
-    return float(c * ex + s * ey), float(-s * ex + c * ey), float(p1.heading - p0.heading)
+    d = se2.relative_pose((p0.x, p0.y, p0.heading), (p1.x, p1.y, p1.heading))
+    return float(d[0]), float(d[1]), float(d[2])
 
 
 def measure_transitions(log: HardwareLog, fit: DecisionFit | None = None,

@@ -5,35 +5,27 @@ states sampled uniformly over (forward, lateral, yaw rate) body velocities, each
 nine primitives is simulated from the rest shape moving rigidly with that velocity
 (eq. 13), and the rigid-body state (eq. 10-12) is stored at regular times along the
 whole horizon, in the body frame of the start pose. The file layout is the contract in
-``docs/motion_library_format.md`` (frog_planner reads it without importing this module).
+``docs/motion_library_format.md``, written and read by ``frog_common.motion_library_file``.
 """
 
 from __future__ import annotations
 
-import json
 import time
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
 import numpy as np
 
-from .batch import atomic_save_npz, run_chunked, spec_hash
+from frog_common.motion_library_file import write_motion_library
+from frog_common.primitives import PRIMITIVE_BITS, PRIMITIVE_NAMES
+from frog_common.version import code_version
+
+from .batch import run_chunked, spec_hash
 from .model_parameters import FrogParameters
-from .schedules import PRIMITIVE_BITS, PRIMITIVE_NAMES
 
-__all__ = ["LibrarySpec", "LibraryFileError", "sample_initial_states", "simulate_transitions",
-           "generate_library", "load_library", "FORMAT", "FORMAT_VERSION"]
+__all__ = ["LibrarySpec", "sample_initial_states", "simulate_transitions", "generate_library"]
 
-FORMAT = "frog-motion-library"
-FORMAT_VERSION = 1
-STATE_NAMES = ("forward_velocity", "lateral_velocity", "yaw_rate")
-TRANSITION_NAMES = ("x", "y", "heading", "forward_velocity", "lateral_velocity", "yaw_rate")
-
-
-class LibraryFileError(ValueError):
-    """A library file is missing, truncated, foreign or inconsistent."""
 
 
 @dataclass
@@ -224,21 +216,6 @@ def _library_task(spec_json: dict, start: int, stop: int) -> dict:
     return {"transitions": trans, "converged": conv}
 
 
-def code_version() -> str:
-    try:
-        from importlib.metadata import version
-        v = version("frog_sim")
-    except Exception:
-        v = "unknown"
-    try:
-        import subprocess
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, cwd=Path(__file__).parent, timeout=5).stdout.strip()
-    except Exception:
-        rev = ""
-    return f"frog_sim {v}" + (f" (git {rev})" if rev else "")
-
-
 def generate_library(spec: LibrarySpec, out_path, work_dir=None, workers: Optional[int] = None,
                      scheduler: Optional[str] = None, progress: bool = True,
                      chunk_size: int = 25) -> Path:
@@ -286,62 +263,10 @@ def generate_library(spec: LibrarySpec, out_path, work_dir=None, workers: Option
         "actuation": {"pulse_duration_s": robot.get("pulse_duration"),
                       "profile": _simulator(spec_json).metadata().get("profile")},
         "time_step_s": spec_json["time_step_s"],
-        "code_version": code_version(),
+        "code_version": code_version("frog_sim"),
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "generation_wall_time_s": elapsed,
     }
-    atomic_save_npz(out_path, {
-        "format": np.array(FORMAT), "format_version": np.array(FORMAT_VERSION),
-        "primitive_names": np.array(PRIMITIVE_NAMES),
-        "primitive_bits": np.array([PRIMITIVE_BITS[n] for n in PRIMITIVE_NAMES]),
-        "state_names": np.array(STATE_NAMES), "initial_states": states,
-        "times": times, "transition_names": np.array(TRANSITION_NAMES),
-        "transitions": transitions, "converged": converged,
-        "metadata": np.array(json.dumps(metadata))})
+    write_motion_library(out_path, states, times, transitions, converged, metadata)
     return out_path
 
-
-_REQUIRED = ("format", "format_version", "primitive_names", "primitive_bits", "state_names",
-             "initial_states", "times", "transition_names", "transitions", "converged",
-             "metadata")
-
-
-def load_library(path) -> dict:
-    """Load and validate a library file; return its arrays plus parsed ``metadata``.
-
-    Raises
-    ------
-    LibraryFileError
-        Naming the problem: missing/unreadable/truncated file, foreign format, version,
-        missing keys, inconsistent shapes, non-uniform times, non-finite converged rows.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise LibraryFileError(f"library file {str(path)!r} does not exist")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, EOFError, ValueError, OSError) as exc:
-        raise LibraryFileError(f"{str(path)!r} is not a readable .npz library (truncated or "
-                               f"foreign file?): {exc}") from exc
-    missing = [k for k in _REQUIRED if k not in data]
-    if missing:
-        raise LibraryFileError(f"{str(path)!r} lacks {missing}; not a {FORMAT} file")
-    if str(data["format"]) != FORMAT:
-        raise LibraryFileError(f"{str(path)!r} has format {str(data['format'])!r}, "
-                               f"expected {FORMAT!r}")
-    if int(data["format_version"]) != FORMAT_VERSION:
-        raise LibraryFileError(f"{str(path)!r} is format version {int(data['format_version'])}, "
-                               f"this code reads {FORMAT_VERSION}")
-    tr, st, times, conv = data["transitions"], data["initial_states"], data["times"], data["converged"]
-    p, n = len(data["primitive_names"]), len(st)
-    if tr.shape != (p, n, len(times), 6) or conv.shape != (p, n) or st.shape != (n, 3):
-        raise LibraryFileError(f"{str(path)!r} has inconsistent shapes: transitions {tr.shape}, "
-                               f"initial_states {st.shape}, times {times.shape}, converged {conv.shape}")
-    steps = np.diff(times)
-    if len(times) < 2 or times[0] != 0 or not np.allclose(steps, steps[0]) or steps[0] <= 0:
-        raise LibraryFileError(f"{str(path)!r}: times must start at 0 and be uniformly increasing")
-    if not np.all(np.isfinite(tr[conv])):
-        raise LibraryFileError(f"{str(path)!r}: non-finite values in converged transitions")
-    data["metadata"] = json.loads(str(data["metadata"]))
-    return data

@@ -53,8 +53,9 @@ from numba.extending import intrinsic
 from .integrator import STATUS_OK, run_direct
 from .model_parameters import FrogParameters
 from .rigid_body import center_of_mass, heading_angle, nodal_velocities, yaw_rate
-from .schedules import LIMB_IDS, LIMB_NAMES, primitive_limbs, primitive_name
+from frog_common.primitives import LIMB_IDS, LIMB_NAMES, primitive_limbs, primitive_name
 from .simulation import DEFAULT_TIME_STEP, FrogSimulation
+from frog_common.se2 import wrap_angle
 
 __all__ = ['Rollouts', 'RolloutStart', 'RolloutResult']
 
@@ -221,10 +222,6 @@ def _run_jobs(counter, system, solver, work, state, f_ext, start_x, start_v, sta
         out_counts[j, 2] = work.lu_state[1] - factorisations
 
 
-def _wrap(angle):
-    return (angle + np.pi) % (2.0 * np.pi) - np.pi
-
-
 class Rollouts:
     """Batched rollouts of the frog simulator from an estimated state (issue 19).
 
@@ -251,7 +248,7 @@ class Rollouts:
     --------
     >>> ro = Rollouts()                                                        # doctest: +SKIP
     >>> start = ro.estimated_start((0.1, 0.2, 0.3), (0.02, 0.0, 0.1), {'FL': -0.3})  # doctest: +SKIP
-    >>> res = ro.rollout_batch(start, [(a, b) for a in 'ABCDEFGHI' for b in 'ABCDEFGHI'],
+    >>> res = ro.rollout_batch(start, list(itertools.product(PRIMITIVE_NAMES, repeat=2)),
     ...                        period=1.43)                                    # doctest: +SKIP
     >>> res.transitions.shape                                                  # doctest: +SKIP
     (81, 2, 6)
@@ -679,7 +676,7 @@ class Rollouts:
         pos = x.reshape(-1, 2)
         mass = self.model.mass
         heading = heading_angle(pos, self.model.reference_pose, mass)
-        heading = previous_heading + _wrap(heading - previous_heading)     # a period turns < pi
+        heading = previous_heading + wrap_angle(heading - previous_heading)     # a period turns < pi
         return np.array([*center_of_mass(pos, mass), heading])
 
     def _twist(self, x, v, heading) -> np.ndarray:

@@ -6,53 +6,16 @@ the robot's serial protocol (DESIGN.md): FL 0, FR 1, BL 2, BR 3.
 * **Gait** (paper "Results"): the front pair fires at ``n / f``, the rear pair at
   ``(n + phase_offset) / f``; phase offset = delay between front and rear firing over
   the cycle time.
-* **Primitives** (DESIGN.md, authors' control code): bits ``[FR, FL, BL, BR]``;
-  A 1100, B 1111, C 0111, D 1011, E 0110, F 1001, G 0100, H 1000, I 0000. The front
-  limbs of the primitive fire first, the rear limbs one pulse later (pulse 80 ms);
-  one primitive per period (1.5 s).
+* **Primitives** (the table in ``frog_common.primitives``): the front limbs of the
+  primitive fire first, the rear limbs one pulse later (pulse 80 ms); one primitive per
+  period (1.5 s).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
-
-LIMB_NAMES = ('FL', 'FR', 'BL', 'BR')
-LIMB_IDS = {name: i for i, name in enumerate(LIMB_NAMES)}
-FRONT_LIMBS = ('FL', 'FR')
-REAR_LIMBS = ('BL', 'BR')
-PRIMITIVE_BIT_ORDER = ('FR', 'FL', 'BL', 'BR')
-PRIMITIVE_BITS = {'A': '1100', 'B': '1111', 'C': '0111', 'D': '1011', 'E': '0110',
-                  'F': '1001', 'G': '0100', 'H': '1000', 'I': '0000'}
-PRIMITIVE_NAMES = tuple(PRIMITIVE_BITS)  # id 0-8 -> 'A'-'I'
-
-
-def primitive_name(primitive) -> str:
-    """Normalise a primitive given as id 0-8 or name 'A'-'I' to its name.
-
-    Raises
-    ------
-    ValueError
-        If the id is out of range 0-8 or the name unknown.
-    """
-    if isinstance(primitive, (int, np.integer)) and not isinstance(primitive, bool):
-        if not 0 <= int(primitive) < len(PRIMITIVE_NAMES):
-            raise ValueError(f'primitive id {primitive} is out of range 0-8')
-        return PRIMITIVE_NAMES[int(primitive)]
-    name = str(primitive).strip().upper()
-    if name.isdigit():
-        return primitive_name(int(name))
-    if name not in PRIMITIVE_BITS:
-        raise ValueError(f"primitive {primitive!r} is unknown; expected an id 0-8 or a name A-I")
-    return name
-
-
-def primitive_limbs(primitive) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """Limbs fired by a primitive: (front limbs fired first, rear limbs one pulse later),
-    each in limb-id order (FL, FR / BL, BR)."""
-    bits = PRIMITIVE_BITS[primitive_name(primitive)]
-    fired = [limb for limb, bit in zip(PRIMITIVE_BIT_ORDER, bits) if bit == '1']
-    return (tuple(l for l in FRONT_LIMBS if l in fired), tuple(l for l in REAR_LIMBS if l in fired))
+from frog_common.primitives import LIMB_IDS, LIMB_NAMES, REAR_LIMBS, primitive_limbs
 
 
 @dataclass

@@ -20,8 +20,11 @@ from .frog_model import FrogModel, build_frog_model
 from .integrator import ConvergenceError, ImplicitEulerIntegrator
 from .model_parameters import FrogParameters
 from .rigid_body import HeadingUnwrapper, RigidBodyState, nodal_velocities, rigid_body_state
-from .schedules import LIMB_NAMES, ActivationSchedule
+from frog_common.primitives import LIMB_NAMES
+
+from .schedules import ActivationSchedule
 from .yaw_disturbance import YawDisturbance, torque_forces
+from frog_common.version import code_version
 
 #: Default time step [s], chosen from the dt convergence study (``frog-sim convergence``
 #: plus finer steps; 10 cycles at 1 Hz, 10 % EGaIn), rerun for the issue-11 fluid model:
@@ -519,11 +522,6 @@ class FrogSimulation:
 
     def metadata(self) -> dict:
         """Parameters, profile, time step and code version (for output files)."""
-        try:
-            from importlib.metadata import version
-            code_version = version('frog_sim')
-        except Exception:  # pragma: no cover - not installed as a distribution
-            code_version = 'unknown'
         return {'params': self.params.as_dict(), 'time_step_s': self.time_step,
                 'profile': {'egain_vol_pct': self.profile.egain_vol_pct,
                             'frequency_hz': self.profile.frequency_hz,
@@ -533,6 +531,6 @@ class FrogSimulation:
                 'gait': None if self._gait is None else {
                     'frequency_hz': self._gait[0], 'phase_offset': self._gait[1],
                     'start_s': self._gait[2], 'duration_s': self._gait[3]},
-                'n_nodes': self.model.n_nodes, 'code_version': code_version,
+                'n_nodes': self.model.n_nodes, 'code_version': code_version('frog_sim'),
                 'units': {'time': 's', 'positions': 'm', 'velocity': 'm/s', 'heading': 'rad',
                           'yaw_rate': 'rad/s'}}

@@ -29,7 +29,7 @@ from soft_robot_common.diagnostics import OK, WARN, NodeDiagnostics
 from soft_robot_interfaces.srv import Rollouts as RolloutsSrv
 
 from frog_sim.core.rollouts import COAST_TIME_STEP, KICK_WINDOW, ROLLOUT_FORCE_TOLERANCE, Rollouts
-from frog_sim.core.schedules import LIMB_NAMES, PRIMITIVE_NAMES
+from frog_common.primitives import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import DEFAULT_TIME_STEP
 
 MAX_DEPTH = 2

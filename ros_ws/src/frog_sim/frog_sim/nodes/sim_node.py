@@ -35,8 +35,9 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
 from frog_sim.core.model_parameters import PARAMETER_SOURCES, FrogParameters
-from frog_sim.core.schedules import LIMB_NAMES, PRIMITIVE_NAMES
+from frog_common.primitives import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import DEFAULT_TIME_STEP, ConvergenceError, FrogSimulation
+from frog_common.se2 import yaw_quaternion
 
 _NODE_PARAMS = [
     Param("real_time_factor", 1.0, "simulated seconds per wall second; 0 = as fast as possible", min=0.0,
@@ -99,11 +100,6 @@ def _model_params(defaults: FrogParameters) -> list:
                           f"{f.name.replace('_', ' ')}{' [' + unit + ']' if unit not in ('', '-') else ''}: "
                           f"{source}", lo, hi, tuple(choices) if choices else None))
     return rows
-
-
-def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
-    """(x, y, z, w) of a rotation by ``yaw`` about z."""
-    return 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
 
 
 class SimNode(Node):
@@ -254,7 +250,7 @@ class SimNode(Node):
             return msg
         alias = copy.deepcopy(msg)
         q = alias.pose.pose.orientation
-        q.x, q.y, q.z, q.w = yaw_to_quaternion(heading + yaw)
+        q.x, q.y, q.z, q.w = yaw_quaternion(heading + yaw)
         c, s = math.cos(yaw), math.sin(yaw)
         alias.twist.twist.linear.x, alias.twist.twist.linear.y = c * forward + s * lateral, -s * forward + c * lateral
         return alias
@@ -267,7 +263,7 @@ class SimNode(Node):
         msg.child_frame_id = self.cfg["body_frame"]
         msg.pose.pose.position.x, msg.pose.pose.position.y = float(s.com[0]), float(s.com[1])
         (msg.pose.pose.orientation.x, msg.pose.pose.orientation.y, msg.pose.pose.orientation.z,
-         msg.pose.pose.orientation.w) = yaw_to_quaternion(float(s.heading))
+         msg.pose.pose.orientation.w) = yaw_quaternion(float(s.heading))
         forward, lateral = (float(v) for v in s.body_velocity)
         # REP-105: twist is expressed in the child (body) frame
         msg.twist.twist.linear.x, msg.twist.twist.linear.y = forward, lateral

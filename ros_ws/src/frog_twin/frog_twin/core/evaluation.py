@@ -19,6 +19,7 @@ from typing import Optional
 
 import numpy as np
 
+from frog_common.primitives import primitive_name
 from frog_planner.core.paths import Path, ellipse_path, line_path, sinusoid_path
 from frog_planner.core.planner import (DEFAULT_HEADING_LOOKAHEAD, DEFAULT_STALL_SPEED, DEFAULT_VELOCITY_LOOKAHEAD,
                                       Planner)
@@ -266,7 +267,7 @@ def turning_response(primitive, period: float = 1.5, duration: float = 45.0, sim
     reached = np.nonzero(np.abs(yaw) >= 0.63 * abs(steady_yaw))[0] if steady_yaw != 0 else []
     rise = float(t[reached[0]]) if len(reached) else float("nan")
     sim.reset()
-    name = primitive if isinstance(primitive, str) else "ABCDEFGHI"[int(primitive)]
+    name = primitive_name(primitive)
     return TurningResponse(name, radius, speed, steady_yaw, rise, float(max(lag)) if lag else 0.0)
 
 

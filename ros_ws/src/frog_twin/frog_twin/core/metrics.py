@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections import Counter
 
 import numpy as np
+from frog_common.se2 import wrap_angle
 
 
 def distance_to_polyline(points, path) -> np.ndarray:
@@ -155,7 +156,7 @@ def pose_errors(est_time, est_pose, true_time, true_pose) -> dict:
     y = np.interp(te, tt, pt[:, 1])
     h = np.interp(te, tt, np.unwrap(pt[:, 2]))
     pos = np.hypot(pe[:, 0] - x, pe[:, 1] - y)
-    head = np.abs((pe[:, 2] - h + np.pi) % (2 * np.pi) - np.pi)
+    head = np.abs(wrap_angle(pe[:, 2] - h))
     return {"n": int(len(te)), "position_mean_m": float(pos.mean()), "position_max_m": float(pos.max()),
             "heading_mean_rad": float(head.mean()), "heading_max_rad": float(head.max()),
             "position_error_m": pos, "heading_error_rad": head, "time_s": te}

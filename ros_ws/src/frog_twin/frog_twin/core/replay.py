@@ -32,6 +32,7 @@ import numpy as np
 from frog_sim.core import hardware_runs as hr
 
 from .metrics import finish_time, tracking_metrics
+from frog_common.se2 import wrap_angle
 
 #: A run counts in the pooled signed-lateral ratio when the real robot's |signed mean
 #: lateral offset| exceeds this [m] (a ratio of offsets near 0 says nothing).
@@ -194,7 +195,7 @@ def replay_setup(run_csv: Path | str, path_csv: Path | str | None = None,
     offset, source = tag_offset_for(log, run_csv.parent, tag_offset)
     t_start = max(fit.t0, float(log.time[0]))
     p0 = hr.local_pose(log, t_start, offset)
-    heading0 = float((p0.heading + math.pi) % (2 * math.pi) - math.pi)
+    heading0 = wrap_angle(p0.heading)
     keep = log.time >= t_start - 1e-9
     time = log.time[keep] - t_start
     pose = np.c_[log.x[keep], log.y[keep], log.theta[keep] + offset]

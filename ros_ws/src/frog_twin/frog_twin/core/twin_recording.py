@@ -7,13 +7,13 @@ stamps in seconds (simulated time in the twin).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from frog_logger.core.log_files import read_messages, recover, summarize
+from frog_common.se2 import yaw_of
 
 #: Topics the analysis reads (root namespace).
 TOPICS = {
@@ -26,10 +26,6 @@ TOPICS = {
 
 def _t(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
-
-
-def _yaw(q) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 @dataclass
@@ -60,10 +56,10 @@ def read_twin_recording(mcap_files, with_images: bool = True) -> TwinRecording:
         for topic, _, m in read_messages(f, topics=wanted):
             if topic == TOPICS["truth"]:
                 p = m.pose.pose.position
-                truth.append([_t(m.header.stamp), p.x, p.y, _yaw(m.pose.pose.orientation)])
+                truth.append([_t(m.header.stamp), p.x, p.y, yaw_of(m.pose.pose.orientation)])
             elif topic == TOPICS["tracked"]:
                 p = m.pose.pose.position
-                tracked.append([_t(m.header.stamp), p.x, p.y, _yaw(m.pose.pose.orientation)])
+                tracked.append([_t(m.header.stamp), p.x, p.y, yaw_of(m.pose.pose.orientation)])
             elif topic == TOPICS["status"]:
                 status.append([_t(m.header.stamp), m.primitive_id, m.total_cost, m.cost_distance, m.cost_heading,
                                m.cost_progress, m.path_progress, m.distance_to_path, m.state])

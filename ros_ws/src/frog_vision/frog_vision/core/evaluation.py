@@ -15,6 +15,7 @@ from frog_vision.core.robot_shape import frog_outline
 from frog_vision.core.frame_difference import raw_differences
 from frog_vision.core.synthetic import Trajectory
 from frog_vision.core.tracker import Tracker
+from frog_common.se2 import wrap_angle
 
 
 @dataclasses.dataclass
@@ -35,7 +36,7 @@ class SequenceResult:
         t = self.truth.t
         ok = self.detected & (t >= t[0] + skip_s)
         pos_err = np.linalg.norm(self.measured[ok, :2] - self.truth.pose[ok, :2], axis=1) * 1e3
-        head_err = np.degrees(np.abs(_wrap(self.measured[ok, 2] - self.truth.pose[ok, 2])))
+        head_err = np.degrees(np.abs(wrap_angle(self.measured[ok, 2] - self.truth.pose[ok, 2])))
         est = np.isfinite(self.velocity[:, 0]) & (t >= t[0] + skip_s) & ~self.dropped
         verr = np.linalg.norm(self.velocity[est, :2] - self.truth.twist[est, :2], axis=1) * 1e3
         werr = np.degrees(np.abs(self.velocity[est, 2] - self.truth.twist[est, 2]))
@@ -131,7 +132,3 @@ def run_sequence(renderer: TankRenderer, tracker: Tracker, truth: Trajectory, oc
             filtered[i] = r.state.pose
             vel[i] = r.state.body_velocity
     return SequenceResult(truth, measured, filtered, vel, detected, occluded, dropped, compute)
-
-
-def _wrap(a):
-    return np.angle(np.exp(1j * np.asarray(a)))

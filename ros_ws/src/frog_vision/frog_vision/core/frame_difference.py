@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from frog_vision.core.state_filter import FilterSettings, RobotState
+from frog_common.se2 import wrap_angle
 
 
 def raw_differences(stamps, poses) -> np.ndarray:
@@ -25,7 +26,7 @@ def raw_differences(stamps, poses) -> np.ndarray:
         return out
     dt = np.diff(t)
     d = np.diff(p, axis=0)
-    d[:, 2] = np.angle(np.exp(1j * d[:, 2]))
+    d[:, 2] = wrap_angle(d[:, 2])
     v = d / dt[:, None]
     th = p[1:, 2]
     c, s = np.cos(th), np.sin(th)
@@ -90,7 +91,7 @@ class FrameDifferenceEstimator:
         if self._z is None:
             self._twist, self._twist_cov = np.zeros(3), np.zeros((3, 3))
         else:
-            z[2] = self._z[2] + np.angle(np.exp(1j * (z[2] - self._z[2])))   # continuous heading
+            z[2] = self._z[2] + wrap_angle(z[2] - self._z[2])   # continuous heading
             dt = t - self.t
             self._twist = raw_differences([self.t, t], [self._z, z])[1]
             c, s = np.cos(z[2]), np.sin(z[2])

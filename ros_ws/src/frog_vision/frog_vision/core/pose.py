@@ -17,6 +17,7 @@ from frog_vision.core.camera_model import CameraModel
 from frog_vision.core.detection import TAG_CORNERS_UNIT, Detection
 from frog_vision.core.robot_shape import COM_AHEAD_OF_RING_CENTRE
 from frog_vision.core.tank_calibration import CameraPose
+from frog_common.se2 import wrap_angle
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,7 +131,7 @@ class TagPoseEstimator:
         if abs(scale - 1.0) > s.max_size_error:
             return None, f"tag edge is {scale * 100:.0f} % of the expected {s.tag_size * 1e3:.0f} mm"
         dp = poses[1:9] - poses[9:]
-        dp[:, 2] = np.angle(np.exp(1j * dp[:, 2]))
+        dp[:, 2] = wrap_angle(dp[:, 2])
         jac = (dp / (2 * h)).T                                    # (3, 8)
         # residual of the rigid fit, mapped back to pixels
         c, sn = np.cos(tag_pose[2]), np.sin(tag_pose[2])
@@ -150,7 +151,7 @@ def compose_offset(pose, offset) -> tuple[np.ndarray, np.ndarray]:
     x, y, a = pose
     ox, oy, oa = offset
     c, s = np.cos(a), np.sin(a)
-    out = np.array([x + c * ox - s * oy, y + s * ox + c * oy, np.angle(np.exp(1j * (a + oa)))])
+    out = np.array([x + c * ox - s * oy, y + s * ox + c * oy, wrap_angle(a + oa)])
     jac = np.array([[1, 0, -s * ox - c * oy], [0, 1, c * ox - s * oy], [0, 0, 1.0]])
     return out, jac
 

@@ -17,10 +17,10 @@ import cv2
 import numpy as np
 
 from frog_vision.core.camera_model import CameraModel
-from frog_vision.core.planar_motion import integrate_twist
 from frog_vision.core.robot_shape import BODY_FRAME_WIDTH, BODY_SIDE, LIMB_WIDTH, RobotShape, frog_outline
 from frog_vision.core.tag_images import tag_border_cells, tag_image
 from frog_vision.core.tank_calibration import Board, CameraPose
+from frog_common.se2 import twist_arc
 
 _CELL_PX = 8           # texture pixels per tag cell
 #: Corner jitter that gives the authors' measured pose noise at rest (see RenderSettings).
@@ -100,8 +100,6 @@ class Occluder:
     x: float
     y: float
     radius: float
-
-
 
 
 class TankRenderer:
@@ -229,7 +227,7 @@ class TankRenderer:
             tag_offset = (float(c[0]), float(c[1]), 0.0)
         n = int(s.blur_samples) if s.exposure > 0 else 1
         taus = (np.linspace(-0.5, 0.5, n) * s.exposure) if n > 1 else np.zeros(1)
-        poses = [integrate_twist(pose, twist, float(t)) for t in taus]
+        poses = [twist_arc(pose, twist, float(t)) for t in taus]
         frame = self._background_lit.copy()
         self._draw_robot(frame, poses, shape, tag_offset)
         for occ in occluders:

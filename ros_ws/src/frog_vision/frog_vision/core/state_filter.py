@@ -39,8 +39,9 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from frog_common.se2 import twist_arc
+from frog_common.se2 import wrap_angle
 
-from frog_vision.core.planar_motion import integrate_twist
 #: Chi-square 99.9 % quantile with 3 degrees of freedom.
 CHI2_3DOF_999 = 16.27
 
@@ -200,18 +201,18 @@ class PoseFilter:
         # constant body twist: the pose moves along an arc (exact), the twist stays; coasting with
         # drag (decay < 1), the arc at the step's mean twist (the twist changes < 1 % per frame)
         mean = np.where(r > 1e-12, -np.expm1(-r) / np.maximum(r, 1e-12), 1.0)
-        x = np.concatenate([integrate_twist(self.x[:3], mean * self.x[3:], dt), decay * self.x[3:]])
+        x = np.concatenate([twist_arc(self.x[:3], mean * self.x[3:], dt), decay * self.x[3:]])
         F = np.eye(6)
         F[3:, 3:] = np.diag(decay)
         h = 1e-6
         for j in range(3, 6):                       # d pose / d twist (numerical), d pose / d heading
             dx = np.zeros(3)
             dx[j - 3] = h
-            F[:3, j] = (integrate_twist(self.x[:3], mean * (self.x[3:] + dx), dt)
-                        - integrate_twist(self.x[:3], mean * (self.x[3:] - dx), dt)) / (2 * h)
+            F[:3, j] = (twist_arc(self.x[:3], mean * (self.x[3:] + dx), dt)
+                        - twist_arc(self.x[:3], mean * (self.x[3:] - dx), dt)) / (2 * h)
         dth = np.array([0, 0, h])
-        F[:3, 2] = (integrate_twist(self.x[:3] + dth, mean * self.x[3:], dt)
-                    - integrate_twist(self.x[:3] - dth, mean * self.x[3:], dt)) / (2 * h)
+        F[:3, 2] = (twist_arc(self.x[:3] + dth, mean * self.x[3:], dt)
+                    - twist_arc(self.x[:3] - dth, mean * self.x[3:], dt)) / (2 * h)
         Q = np.zeros((6, 6))
         Q[:3, :3] = np.diag(q * dt ** 3 / 3)
         Q[3:, 3:] = np.diag(q * dt)
@@ -245,7 +246,7 @@ class PoseFilter:
             return self.state(t), None
         x, P = self._predicted(t)
         innov = z - x[:3]
-        innov[2] = np.angle(np.exp(1j * innov[2]))      # heading unwrapped against the prediction
+        innov[2] = wrap_angle(innov[2])      # heading unwrapped against the prediction
         S = P[:3, :3] + R
         floor = np.diag([s.gate_floor_m ** 2] * 2 + [s.gate_floor_rad ** 2])
         d2 = float(innov @ np.linalg.solve(S + floor, innov))
@@ -282,4 +283,3 @@ class PoseFilter:
         x, P = self._predicted(t) if t > self.t else (self.x, self.P)
         coast = (t > self.last_measurement) if coasting is None else coasting
         return RobotState(float(t), x[:3].copy(), x[3:].copy(), P[:3, :3].copy(), P[3:, 3:].copy(), coast)
-

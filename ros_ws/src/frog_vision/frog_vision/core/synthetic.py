@@ -15,8 +15,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-
-from frog_vision.core.renderer import integrate_twist
+from frog_common.se2 import twist_arc
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,7 +74,7 @@ def swim_and_turn(duration: float = 10.0, fps: float = 30.0, start=(-0.05, -0.15
     pose[0] = start
     for i in range(1, n):
         pose[i] = \
-            integrate_twist(pose[i - 1], ((fwd[i - 1] + fwd[i]) / 2, (lat[i - 1] + lat[i]) / 2,
+            twist_arc(pose[i - 1], ((fwd[i - 1] + fwd[i]) / 2, (lat[i - 1] + lat[i]) / 2,
                                           (yaw[i - 1] + yaw[i]) / 2), dt)
     idx = np.round(np.arange(0, duration, 1.0 / fps) / dt).astype(int)
     return Trajectory(tt[idx], pose[idx], np.column_stack([fwd, lat, yaw])[idx], curl[idx])

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from frog_common.se2 import wrap_angle
 
 TRACKER_KEYS = ("offset_x", "offset_y", "offset_yaw")
 
@@ -90,7 +91,7 @@ def estimate_tag_offset(t, tag_pose, window: float = 1.5, min_travel: float = 0.
         if np.hypot(*d) < min_travel or abs(turn) > max_turn:
             continue
         travel = math.atan2(d[1], d[0])
-        yaws.append(((travel - p0[2] - 0.5 * turn) + math.pi) % (2 * math.pi) - math.pi)
+        yaws.append(wrap_angle(travel - p0[2] - 0.5 * turn))
         rows.append(idx)
     if not yaws:
         raise ValueError(f"no window of {window:g} s with more than {min_travel * 100:g} cm travel and less than "

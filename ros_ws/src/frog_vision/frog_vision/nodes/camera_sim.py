@@ -34,12 +34,13 @@ from visualization_msgs.msg import Marker
 
 from frog_vision.core.camera_model import CameraModel
 from frog_vision.core.pose import compose_offset
-from frog_vision.core.renderer import AUTHORS_CORNER_JITTER_PX, Occluder, RenderSettings, TankRenderer, integrate_twist
+from frog_vision.core.renderer import AUTHORS_CORNER_JITTER_PX, Occluder, RenderSettings, TankRenderer
 from frog_vision.core.robot_shape import RobotShape, frog_outline, shape_from_segments
 from frog_vision.core.tank_calibration import Board
 from frog_vision.nodes.common import load_camera, load_camera_pose
-from frog_vision.nodes.messages import array_to_image, camera_info_msg, s_to_stamp, stamp_to_s, yaw_of
+from frog_vision.nodes.messages import array_to_image, camera_info_msg, s_to_stamp, stamp_to_s
 from frog_vision.nodes.settings import CAMERA_PARAMS, TAG_PARAMS
+from frog_common.se2 import twist_arc, yaw_of
 
 PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
     Param("board_file", "", "calibration board drawn in the tank (YAML); empty = the default board"),
@@ -272,10 +273,10 @@ def _interpolate(odom, t: float):
     i = bisect.bisect_right(times, t + 1e-9)
     if i == 0:
         t0, pose, twist = odom[0]
-        return integrate_twist(pose, twist, max(t - t0, -0.2)), twist
+        return twist_arc(pose, twist, max(t - t0, -0.2)), twist
     t0, p0, v0 = odom[i - 1]
     if i == len(odom) or abs(t - t0) < 1e-9:
-        return integrate_twist(p0, v0, min(t - t0, 0.2)), v0
+        return twist_arc(p0, v0, min(t - t0, 0.2)), v0
     t1, p1, v1 = odom[i]
     w = (t - t0) / (t1 - t0)
     d = p1 - p0

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import array
-import math
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -68,11 +67,3 @@ def camera_info_msg(model: CameraModel, stamp: Time, frame_id: str) -> CameraInf
 def model_from_camera_info(msg: CameraInfo) -> CameraModel:
     return CameraModel.from_camera_info(dict(width=msg.width, height=msg.height, k=list(msg.k), d=list(msg.d),
                                              distortion_model=msg.distortion_model, r=list(msg.r), p=list(msg.p)))
-
-
-def yaw_of(q) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-
-
-def set_yaw(q, yaw: float) -> None:
-    q.x, q.y, q.z, q.w = 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)

@@ -52,9 +52,9 @@ from frog_vision.core.pose import PoseSettings
 from frog_vision.core.state_filter import FilterSettings
 from frog_vision.core.tracker import ESTIMATORS, Tracker
 from frog_vision.nodes.common import load_camera, load_camera_pose
-from frog_vision.nodes.messages import (array_to_image, image_to_array, model_from_camera_info, set_yaw,
-                                        stamp_to_s)
+from frog_vision.nodes.messages import array_to_image, image_to_array, model_from_camera_info, stamp_to_s
 from frog_vision.nodes.settings import CAMERA_PARAMS, TAG_PARAMS
+from frog_common.se2 import set_yaw
 
 _F = FilterSettings()
 PARAMS = TAG_PARAMS + CAMERA_PARAMS + [

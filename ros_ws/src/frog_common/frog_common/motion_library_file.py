@@ -1,15 +1,19 @@
-"""Read and validate a motion-primitive library file (docs/motion_library_format.md).
+"""The motion-primitive library file (docs/motion_library_format.md): write, read, validate.
 
-frog_sim writes the file; this module reads it independently (the packages never import
-each other) and rejects, with a message naming the problem, anything that is not a complete
-format-1 library. Paper seed 000, "Data Collection Using the DER Simulation", eq. 14.
+frog_sim writes it (``frog-library generate``), frog_planner reads it; both through this one
+schema. The reader rejects, with a message naming the problem, anything that is not a
+complete format-1 library. Paper seed 000, "Data Collection Using the DER Simulation", eq. 14.
 """
 
 import json
 import zipfile
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
+
+from .atomic_files import atomic_save_npz
+from .primitives import PRIMITIVE_BITS, PRIMITIVE_NAMES
 
 FORMAT_NAME = "frog-motion-library"
 FORMAT_VERSION = 1
@@ -239,3 +243,24 @@ def _validate(data, src):
     return MotionLibrary(primitive_names=names, primitive_bits=bits, initial_states=init.astype(float),
                          times=times.astype(float), transitions=trans, converged=conv,
                          metadata=metadata, source=src)
+
+
+def write_motion_library(path, initial_states, times, transitions, converged, metadata: dict,
+                         primitive_names=PRIMITIVE_NAMES) -> Path:
+    """Write a format-1 library so that ``path`` is either absent or complete (atomic rename).
+
+    The arrays are as :class:`MotionLibrary` holds them; the result is validated by reading it
+    back, so a writer can never produce a file the planner refuses.
+    """
+    path = Path(path)
+    arrays = {
+        "format": np.array(FORMAT_NAME), "format_version": np.array(FORMAT_VERSION),
+        "primitive_names": np.array(tuple(primitive_names)),
+        "primitive_bits": np.array([PRIMITIVE_BITS[n] for n in primitive_names]),
+        "state_names": np.array(STATE_NAMES), "initial_states": np.asarray(initial_states),
+        "times": np.asarray(times), "transition_names": np.array(TRANSITION_NAMES),
+        "transitions": np.asarray(transitions), "converged": np.asarray(converged),
+        "metadata": np.array(json.dumps(metadata))}
+    _validate(arrays, str(path))
+    atomic_save_npz(path, arrays)
+    return path

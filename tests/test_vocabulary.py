@@ -1,0 +1,25 @@
+"""The messages' constants are the shared table's (frog_common.primitives)."""
+
+from frog_common.primitives import LIMB_IDS, PRIMITIVE_BITS, PRIMITIVE_IDS
+from soft_robot_interfaces.msg import LimbActivation, Primitive
+
+
+def test_primitive_constants_equal_the_table():
+    ids = {name[3:]: getattr(Primitive, name) for name in dir(Primitive)
+           if name.startswith("ID_") and name != "ID_MAX"}
+    assert ids == PRIMITIVE_IDS
+    assert Primitive.ID_MAX == max(PRIMITIVE_IDS.values()) == len(PRIMITIVE_BITS) - 1
+
+
+def test_limb_constants_equal_the_table():
+    limbs = {name[5:]: getattr(LimbActivation, name) for name in dir(LimbActivation) if name.startswith("LIMB_")}
+    assert limbs == LIMB_IDS
+
+
+def test_the_message_files_bit_table_is_the_shared_one():
+    import re
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "ros_ws/src/soft_robot_interfaces/msg/Primitive.msg").read_text()
+    rows = {name: (int(i), bits) for i, name, bits in re.findall(r"(\d)\s+([A-I])\s+([01]{4})", text)}
+    assert {n: b for n, (_, b) in rows.items()} == PRIMITIVE_BITS
+    assert {n: i for n, (i, _) in rows.items()} == PRIMITIVE_IDS
