@@ -24,7 +24,8 @@ import time
 import numpy as np
 from frog_common.primitives import PRIMITIVE_NAMES
 from frog_planner.core.paths import ellipse_path
-from frog_planner.core.planner import PAPER_COST, Planner
+from frog_planner.core.planner import Planner
+from frog_planner.core.settings import PlannerSettings
 from frog_planner.core.transition_model import TransitionModel
 
 N_STATES = 8503          # paper: 8503 simulations per action
@@ -156,7 +157,7 @@ def main(argv=None):
     print(f"library: {model.n_states} initial states x {model.n_primitives} primitives, T = {PERIOD} s, "
           f"metric {args.metric}; model built in {build_ms:.1f} ms; path {path.name} {path.length:.3f} m")
     # The loop reference implements the paper's planner (eq. 19 at the leaf, tangent heading,
-    # nearest-state transitions), so the like-for-like timing uses PAPER_COST; the defaults
+    # nearest-state transitions), so the like-for-like timing uses PlannerSettings.paper(); the defaults
     # (look-aheads, gradient correction, stall guard) are timed separately below.
     corrected = TransitionModel(init, trans, NAMES, period=PERIOD, metric=args.metric, gradient_correction=True)
     print(f"{'depth':>5} {'sequences':>9} {'planner median':>15} {'p90':>9} {'n':>5} {'loop median':>12} {'n':>4} "
@@ -164,12 +165,12 @@ def main(argv=None):
     ok = True
     for depth, n_loop, target_ms in [(1, args.loop_decisions[0], 1.0), (3, args.loop_decisions[1], 20.0)]:
         poses, vels = query_stream(path, args.decisions, seed=args.seed + depth)
-        planner = Planner(model, path, depth=depth, **PAPER_COST)
+        planner = Planner(model, path, PlannerSettings.paper(depth=depth))
         for pose, vel in zip(poses[:20], vels[:20]):     # warm-up (imports, caches)
             planner.decide(pose, vel)
         planner.reset()
         t_fast, decisions = time_decisions(lambda p, v: planner.decide(p, v).sequence, poses, vels)
-        default = Planner(corrected, path, depth=depth)
+        default = Planner(corrected, path, PlannerSettings(depth=depth))
         for pose, vel in zip(poses[:20], vels[:20]):
             default.decide(pose, vel)
         default.reset()

@@ -126,13 +126,14 @@ def library_latency(library_file, period, repeats, starts):
     """The library mode's decision time (Planner.decide, default cost), beside the rollouts."""
     from frog_planner.core.paths import sinusoid_path
     from frog_planner.core.planner import Planner
+    from frog_planner.core.settings import PlannerSettings
     from frog_planner.core.transition_model import TransitionModel
     if not library_file.is_file():
         print(f'  library mode: {library_file} not found (frog-twin generates it on first use); not timed')
         return
     model = TransitionModel.load(str(library_file), period=period)
     for depth in (1, 2):
-        planner = Planner(model, sinusoid_path(), depth=depth)
+        planner = Planner(model, sinusoid_path(), PlannerSettings(depth=depth))
         cpu, wall = [], []
         for _ in range(repeats):
             for start in starts:

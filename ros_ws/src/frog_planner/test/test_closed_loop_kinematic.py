@@ -9,6 +9,7 @@ import pytest
 
 from frog_planner.core.paths import line_path
 from frog_planner.core.planner import Planner
+from frog_planner.core.settings import PlannerSettings
 from frog_planner.core.prediction import apply_transition
 from frog_planner.core.transition_model import TransitionModel
 
@@ -33,7 +34,7 @@ def plant_and_model(synthetic):
 
 def _run(plant, model, depth, lookahead, offset=0.05, max_steps=40):
     path = line_path()
-    planner = Planner(model, path, depth=depth, heading_lookahead=lookahead, velocity_lookahead=0.0)
+    planner = Planner(model, path, PlannerSettings(depth=depth, heading_lookahead=lookahead, velocity_lookahead=0.0))
     pose, vel = np.array([0.0, offset, 0.0]), np.zeros(3)
     distances = []
     for _ in range(max_steps):

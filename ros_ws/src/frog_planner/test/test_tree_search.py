@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from frog_planner.core.paths import ellipse_path, line_path, sinusoid_path
-from frog_planner.core.planner import PAPER_COST, Planner
+from frog_planner.core.planner import Planner
+from frog_planner.core.settings import PlannerSettings
 from frog_planner.core.transition_model import TransitionModel
 from frog_planner.core.tree_search import CostWeights, search
 
@@ -136,8 +137,8 @@ def test_heading_lookahead_by_hand():
     # Near the end the look-ahead point is clipped to the last point (0.4, 0).
     cost = path_cost(path, [0.38, -0.02, 0.0], CostWeights(), 0.5, heading_lookahead=0.1)
     assert cost.heading_error[0] == pytest.approx(math.atan2(0.02, 0.02))
-    with pytest.raises(ValueError, match="heading_lookahead -0.1 m"):
-        Planner(TransitionModel(np.zeros((1, 3)), np.zeros((1, 1, 6)), ["A"]), path, heading_lookahead=-0.1)
+    with pytest.raises(ValueError, match="heading_lookahead=-0.1 is below its minimum 0.0"):
+        PlannerSettings(heading_lookahead=-0.1)
 
 
 def test_depth_one_is_the_cheapest_single_primitive(tiny):
@@ -168,8 +169,10 @@ def test_weights_change_the_choice(tiny):
 def test_bad_depth_and_weights_are_rejected(tiny):
     states, table = tiny
     model = TransitionModel(states, table, list("ABCDEFGHI"))
+    with pytest.raises(ValueError, match="depth=6 is above its maximum 5"):
+        PlannerSettings(depth=6)
     with pytest.raises(ValueError, match="search depth 6 is out of range; expected 1-5"):
-        Planner(model, line_path(), depth=6)
+        search(model, line_path(), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 6)
     with pytest.raises(ValueError, match="cost weight distance = -1"):
         CostWeights(distance=-1.0)
 
@@ -178,7 +181,7 @@ def test_planner_decision_fields(tiny):
     states, table = tiny
     model = TransitionModel(states, table, list("ABCDEFGHI"))
     path = line_path(length=0.4)
-    planner = Planner(model, path, depth=2, **PAPER_COST)
+    planner = Planner(model, path, PlannerSettings.paper(depth=2))
     d = planner.decide([0.1, 0.01, 0.0], [0.02, 0.0, 0.0])
     assert 0 <= d.primitive_id < 9 and d.name == "ABCDEFGHI"[d.primitive_id]
     assert len(d.sequence) == 2 and d.sequence[0] == d.primitive_id
@@ -194,13 +197,13 @@ def test_planner_decision_fields(tiny):
     assert planner.decide([0.395, 0.0, 0.0], [0.02, 0.0, 0.0]).goal_reached
     # The default planner measures heading against the path point 0.1 m ahead: from (0.1, 0.01)
     # that is (0.2, 0), atan(0.01 / 0.1) to the right of the heading.
-    d = Planner(model, path, depth=2).decide([0.1, 0.01, 0.0], [0.02, 0.0, 0.0])
+    d = Planner(model, path, PlannerSettings(depth=2)).decide([0.1, 0.01, 0.0], [0.02, 0.0, 0.0])
     assert d.current_cost_terms.heading == pytest.approx(W_B * math.atan(0.01 / 0.1))
 
 
 def test_planner_progress_is_monotone_on_the_ellipse(tiny):
     states, table = tiny
-    planner = Planner(TransitionModel(states, table, list("ABCDEFGHI")), ellipse_path(), depth=1)
+    planner = Planner(TransitionModel(states, table, list("ABCDEFGHI")), ellipse_path(), PlannerSettings(depth=1))
     path = planner.path
     rng = np.random.default_rng(2)
     history = []
@@ -230,8 +233,8 @@ def test_planner_rejects_bad_measurements_and_keeps_its_state(tiny):
 def test_world_state_entry_applies_step5(tiny):
     states, table = tiny
     model = TransitionModel(states, table, list("ABCDEFGHI"))
-    a = Planner(model, line_path(), depth=2)
-    b = Planner(model, line_path(), depth=2)
+    a = Planner(model, line_path(), PlannerSettings(depth=2))
+    b = Planner(model, line_path(), PlannerSettings(depth=2))
     th = 0.4
     # Body velocity (0.02 forward, 0.005 left) seen in the world frame at heading th, by hand.
     world = (0.02 * math.cos(th) - 0.005 * math.sin(th), 0.02 * math.sin(th) + 0.005 * math.cos(th))
@@ -297,7 +300,7 @@ def test_velocity_lookahead_and_yaw_rate_term_match_brute_force(tiny):
     with pytest.raises(ValueError, match="velocity_lookahead"):
         search(model, path, pose, vel, 1, velocity_lookahead=-1.0)
     with pytest.raises(ValueError, match="yaw_rate_weight"):
-        Planner(model, path, yaw_rate_weight=float("nan"))
+        PlannerSettings(yaw_rate_weight=float("nan"))
 
 
 def _drifting_model(bits):
@@ -320,10 +323,11 @@ def test_planner_does_not_wait_forever_at_rest(synthetic, depth):
     path = line_path(length=0.3)
     weights = CostWeights(distance=500.0, heading=0.0, progress=0.0)
     rest = [0.0, 0.0, 0.0]
-    kw = dict(heading_lookahead=0.0, velocity_lookahead=0.0)
-    paper = Planner(model, path, weights, depth, stall_speed=0.0, **kw)
+    kw = dict(w_distance=500.0, w_heading=0.0, w_progress=0.0, depth=depth, heading_lookahead=0.0,
+              velocity_lookahead=0.0)
+    paper = Planner(model, path, PlannerSettings(stall_speed=0.0, **kw))
     assert paper.decide([0.0, 0.0, 0.0], rest).name == "I"
-    d = Planner(model, path, weights, depth, **kw).decide([0.0, 0.0, 0.0], rest)
+    d = Planner(model, path, PlannerSettings(**kw)).decide([0.0, 0.0, 0.0], rest)
     assert d.name != "I" and d.sequence[0] == d.primitive_id
     # the cheapest leaf among the sequences that start with an action (brute force over leaves)
     res = search(model, path, [0.0, 0.0, 0.0], rest, depth, weights)
@@ -333,10 +337,10 @@ def test_planner_does_not_wait_forever_at_rest(synthetic, depth):
     if depth == 1:
         assert d.name == "A"                  # the smallest drift (2 mm right, 0.02 rad)
     # moving, the guard stays out of the way
-    moving = Planner(model, path, weights, depth, **kw)
+    moving = Planner(model, path, PlannerSettings(**kw))
     assert moving.decide([0.0, 0.0, 0.0], [0.03, 0.0, 0.0]).name == "I"
     with pytest.raises(ValueError, match="stall_speed"):
-        Planner(model, path, weights, depth, stall_speed=-1.0)
+        PlannerSettings(stall_speed=-1.0)
 
 
 def _reference_rows(states, table, pose, vel, depth, scale):

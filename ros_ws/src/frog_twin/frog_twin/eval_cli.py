@@ -35,9 +35,8 @@ def _run(args, path_name, depth, metric, model_cache):
     if key not in model_cache:
         model_cache[key] = TransitionModel.load(args.library, **settings.model_kwargs())
     path = PATHS[path_name]()
-    res = run_closed_loop(path, model_cache[key], period=settings.period,
-                          start_offset=(0.0, args.lateral_offset, 0.0), max_time=args.max_time,
-                          transitions=args.transitions, **settings.planner_kwargs())
+    res = run_closed_loop(path, model_cache[key], settings, start_offset=(0.0, args.lateral_offset, 0.0),
+                          max_time=args.max_time, transitions=args.transitions)
     files = save_result(res, args.out)
     m = res.metrics
     print(f"{path_name:8s} depth {depth} {metric:9s}: goal {'yes' if m['goal_reached'] else 'NO '} "

@@ -65,7 +65,6 @@ class Check:
 
 def real_graph(args, name: str, out: Path, path_settings, settings):
     """The real robot's processes: the graph file's real mode with this run's devices and files."""
-    from frog_planner.core.settings import as_dict
 
     from frog_twin.twin import GRAPH_FILE, transitions_choice
     camera_info = str(args.camera_info) if getattr(args, "camera_info", None) else None
@@ -79,7 +78,7 @@ def real_graph(args, name: str, out: Path, path_settings, settings):
         "tracker_node": tracker,
         "image_preview": {"rate_hz": args.video_rate},
         "bridge_node": {"port": str(args.robot_port or "/dev/ttyACM0")},
-        "planner_node": {"library_file": str(args.library), **as_dict(settings), **as_dict(path_settings),
+        "planner_node": {"library_file": str(args.library), **settings.as_dict(), **path_settings.as_dict(),
                          **transitions_choice(args)[0]},
     }
     return load_graph(getattr(args, "graph_file", None) or GRAPH_FILE, "real", overrides,
@@ -385,7 +384,6 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
 def real_report(args, name, out, settings, path_settings, reason, wall, checks, supervision=None,
                 earlier=frozenset()) -> dict:
     """The twin's report of a real run, on the tracked pose (the only trajectory there is)."""
-    from frog_planner.core.settings import as_dict
 
     from frog_twin.core.twin_recording import readable_files, run_files
     files = run_files(out / "recording", earlier)     # not an earlier run's files in the same folder
@@ -411,7 +409,7 @@ def real_report(args, name, out, settings, path_settings, reason, wall, checks, 
     metrics.update(mode="real", trajectory="tracked (camera + tracker); no ground truth", stop_reason=reason,
                    wall_time_s=wall, recording=[str(f) for f in files], supervision=supervision,
                    preflight=[c.__dict__ for c in checks],
-                   settings={"planner": as_dict(settings), "path": as_dict(path_settings),
+                   settings={"planner": settings.as_dict(), "path": path_settings.as_dict(),
                              "robot_port": str(args.robot_port), "camera": str(args.camera),
                              "camera_info": str(args.camera_info) if args.camera_info else None,
                              "tank_calibration": str(args.tank_calibration) if args.tank_calibration else None,

@@ -57,7 +57,7 @@ import sys
 import time
 from pathlib import Path
 
-from frog_planner.core.settings import PathSettings, PlannerSettings, add_arguments, as_dict, from_arguments
+from frog_planner.core.settings import PathSettings, PlannerSettings, add_arguments, from_arguments
 from frog_vision.core.state_filter import FilterSettings
 from soft_robot_common.graph import GraphError, load_graph
 from soft_robot_common.processes import NodeProcess, acquire_domain
@@ -253,7 +253,7 @@ def twin_graph(args, name: str, out: Path, path_settings, settings, start_pose, 
                      "limb_strength_sd": args.limb_strength_sd, "kick_strength_sd": args.kick_strength_sd,
                      "yaw_disturbance_sd": args.yaw_disturbance_sd, "yaw_disturbance_tau_s": args.yaw_disturbance_tau,
                      "seed": args.seed},
-        "planner_node": {"library_file": str(args.library), **as_dict(settings), **as_dict(path_settings),
+        "planner_node": {"library_file": str(args.library), **settings.as_dict(), **path_settings.as_dict(),
                          **transitions_choice(args)[0]},
     }
     if not args.no_vision:
@@ -448,7 +448,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
             command_bound=float(bridge.get("max_command_age_s", 0.5)) + 0.2, goal=goal,
             stop_reason=stop_reason, unclean=metrics["unclean_stops"])
     metrics["recording"] = [str(f) for f in files]
-    metrics["settings"] = {"planner": as_dict(settings), "path": as_dict(path_settings),
+    metrics["settings"] = {"planner": settings.as_dict(), "path": path_settings.as_dict(),
                            "start_pose": [x0, y0, h0], "real_time_factor": args.real_time_factor,
                            "seed": args.seed, "vision": not args.no_vision, "serial": not args.direct,
                            "limb_strength_sd": args.limb_strength_sd, "kick_strength_sd": args.kick_strength_sd,

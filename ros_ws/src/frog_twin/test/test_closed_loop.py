@@ -11,7 +11,7 @@ import pytest
 
 from frog_planner.core.paths import line_path, parametric_path
 from frog_planner.core.transition_model import TransitionModel
-from frog_planner.core.tree_search import CostWeights
+from frog_planner.core.settings import PlannerSettings
 from frog_twin.core.evaluation import run_closed_loop
 
 PERIOD = 1.5
@@ -40,8 +40,8 @@ def test_closed_loop_reduces_a_5cm_lateral_offset(library):
     only a few degrees), so this run weighs heading three times more (w_b = 150)."""
     model = TransitionModel.load(library, period=PERIOD, gradient_correction=True)
     path = line_path(length=0.6)
-    res = run_closed_loop(path, model, depth=1, period=PERIOD, start_offset=(0.0, 0.05, 0.0),
-                          max_time=60.0, weights=CostWeights(500.0, 150.0, 300.0))
+    res = run_closed_loop(path, model, PlannerSettings(period=PERIOD, w_heading=150.0),
+                          start_offset=(0.0, 0.05, 0.0), max_time=60.0)
     inside = (res.pose[:, 0] >= -0.01) & (res.pose[:, 0] <= path.length)   # beside the line, not past it
     d = _distance_to_x_axis(res.pose)
     assert d[0] == pytest.approx(0.05, abs=1e-3)
@@ -55,7 +55,7 @@ def test_closed_loop_reduces_a_5cm_lateral_offset(library):
 def test_straight_start_stays_on_the_line(library):
     model = TransitionModel.load(library, period=PERIOD, gradient_correction=True)
     path = line_path(length=0.30)
-    res = run_closed_loop(path, model, depth=1, period=PERIOD, max_time=40.0)
+    res = run_closed_loop(path, model, PlannerSettings(period=PERIOD), max_time=40.0)
     assert res.metrics["goal_reached"]
     d = _distance_to_x_axis(res.pose)
     assert d.mean() < 0.01 and d.max() < 0.03
@@ -81,8 +81,7 @@ def test_follows_a_right_hand_arc(library):
 
     path = parametric_path(arc, name="arc")
     model = TransitionModel.load(library, period=PERIOD, gradient_correction=True)
-    res = run_closed_loop(path, model, depth=1, period=PERIOD, max_time=45.0,
-                          weights=CostWeights(500.0, 150.0, 300.0))
+    res = run_closed_loop(path, model, PlannerSettings(period=PERIOD, w_heading=150.0), max_time=45.0)
     centre = np.array([0.0, -RADIUS])
     rel = res.pose[:, :2] - centre
     d = np.abs(np.hypot(rel[:, 0], rel[:, 1]) - RADIUS)          # distance to the circle
@@ -103,7 +102,7 @@ def test_simulator_transitions_predict_the_next_pose_exactly(library):
     prediction of the same step is only approximate (it ignores the limbs' state)."""
     model = TransitionModel.load(library, period=PERIOD, gradient_correction=True)
     path = line_path(length=0.30)
-    res = run_closed_loop(path, model, depth=1, period=PERIOD, max_time=4.0, transitions="simulator",
+    res = run_closed_loop(path, model, PlannerSettings(period=PERIOD), max_time=4.0, transitions="simulator",
                           start_offset=(0.0, 0.02, 0.0), sample_interval=PERIOD)
     assert len(res.decisions) >= 3
     assert res.metrics["transitions"] == "simulator" and res.metrics["metric"] == "exact"
@@ -111,7 +110,8 @@ def test_simulator_transitions_predict_the_next_pose_exactly(library):
         reached = res.pose[k + 1]
         assert np.abs(np.asarray(dec["predicted_pose"]) - reached).max() < 1e-9, (k, dec["predicted_pose"], reached)
     with pytest.raises(ValueError, match="depth 1-2"):
-        run_closed_loop(path, model, depth=3, period=PERIOD, max_time=2.0, transitions="simulator")
+        run_closed_loop(path, model, PlannerSettings(depth=3, period=PERIOD), max_time=2.0,
+                        transitions="simulator")
 
 
 def test_turning_response_mirrors_and_matches_its_own_track():

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import math
 from typing import Any, Callable, Iterable
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
                                 SetParametersResult)
+from frog_common.settings import describe, param_name, range_problem, to_param
 from rclpy.exceptions import ParameterException
 
 _TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
@@ -81,6 +81,8 @@ class Param:
     valid topic names (empty = none); one named ``*_frame`` or ``frame_id`` a non-empty frame
     id. ``ints_as_text`` lets a string parameter be given as
     an integer (``-p source:=0``: YAML reads 0 as a number); the node sees its text.
+    The range check is frog_common's :func:`~frog_common.settings.range_problem`, the one
+    the cores' settings use.
     """
 
     name: str
@@ -91,6 +93,7 @@ class Param:
     choices: tuple | None = None
     live: bool = False
     ints_as_text: bool = False     # a string that may also be given as an integer (a device index)
+    special: tuple = ()            # values allowed outside the range (a sentinel such as 0 = none)
 
     @property
     def kind(self) -> type:
@@ -105,17 +108,12 @@ class Param:
             value, ok_type = str(value), True
         if not ok_type:
             return f"{self.name}={value!r} must be {_TYPE_WORDS[kind]}"
-        if kind in (int, float):
-            if kind is float and not math.isfinite(value):
-                return f"{self.name}={value!r} must be finite"
-            if kind is int and not -_INT_LIMIT <= value <= _INT_LIMIT:
-                return f"{self.name}={value!r} is outside +-{_INT_LIMIT}"
-            if self.min is not None and value < self.min:
-                return f"{self.name}={value!r} is below its minimum {self.min!r}"
-            if self.max is not None and value > self.max:
-                return f"{self.name}={value!r} is above its maximum {self.max!r}"
-        if self.choices is not None and value not in self.choices:
-            return f"{self.name}={value!r} is not one of {', '.join(map(repr, self.choices))}"
+        if kind is int and not -_INT_LIMIT <= value <= _INT_LIMIT:
+            return f"{self.name}={value!r} is outside +-{_INT_LIMIT}"
+        if value not in self.special:
+            problem = range_problem(self.name, value, self.min, self.max, self.choices)
+            if problem:
+                return problem
         if kind in (str, list) and _is_topic_param(self.name):
             for topic in ([value] if kind is str else value):
                 problem = topic_name_problem(topic) if topic else None
@@ -147,11 +145,13 @@ class Param:
 
 
 def params_from_dataclass(cls, names: Iterable[str] | None = None, defaults=None) -> list[Param]:
-    """:class:`Param` rows from a settings dataclass whose fields carry metadata.
+    """:class:`Param` rows from a settings dataclass made with frog_common's ``setting()``.
 
-    Field metadata keys: ``description``, ``range`` ``(lo, hi)`` (either may be None),
-    ``choices``, ``live``, ``unit`` (appended to the description). ``defaults`` (an
-    instance) overrides the class defaults; ``names`` selects and orders fields.
+    Each field gives one parameter (named by its ``param``, else the field): its default
+    (``defaults``, an instance, overrides the class's), description with unit, range or
+    choices, and ``live``. A sentinel's parameter value is allowed beside the range.
+    ``names`` (field names) selects and orders fields. Build the instance back with
+    ``frog_common.settings.from_params``.
     """
     fields = {f.name: f for f in dataclasses.fields(cls)}
     rows = []
@@ -160,14 +160,13 @@ def params_from_dataclass(cls, names: Iterable[str] | None = None, defaults=None
         md = f.metadata
         default = getattr(defaults, name) if defaults is not None else (
             f.default if f.default is not dataclasses.MISSING else f.default_factory())
-        if isinstance(default, tuple):
-            default = list(default)
-        lo, hi = md.get("range", (None, None))
-        text = md.get("description", name)
-        if md.get("unit"):
-            text += f" [{md['unit']}]"
-        rows.append(Param(name, default, text, lo, hi, tuple(md["choices"]) if "choices" in md else None,
-                          bool(md.get("live", False))))
+        sentinel = md.get("sentinel")
+        lo, hi = md.get("min"), md.get("max")
+        if sentinel is not None and lo is not None and sentinel[0] < lo:
+            lo = sentinel[0]            # the descriptor shows the sentinel as allowed
+        rows.append(Param(param_name(f), to_param(f, default), describe(f), lo, hi, md.get("choices"),
+                          bool(md.get("live", False)),
+                          special=(sentinel[0],) if sentinel is not None else ()))
     return rows
 
 

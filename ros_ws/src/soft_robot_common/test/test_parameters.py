@@ -1,9 +1,11 @@
 """Param tables: descriptors, start-up checks, live sets, undeclared overrides (in-process rclpy)."""
 
 import dataclasses
+import math
 
 import pytest
 import rclpy
+from frog_common.settings import Settings, from_params, setting
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from soft_robot_common import ConfigurationError, Param, declare_parameters, params_from_dataclass, undeclared_overrides
@@ -83,14 +85,23 @@ def test_undeclared_overrides_name_the_closest_parameter(context):
 
 def test_rows_from_a_dataclass():
     @dataclasses.dataclass(frozen=True)
-    class S:
-        w: float = dataclasses.field(default=2.0, metadata={"description": "weight", "range": (0.0, None),
-                                                            "unit": "1/m", "live": True})
-        kind: str = dataclasses.field(default="a", metadata={"choices": ("a", "b")})
-    w, kind = params_from_dataclass(S)
+    class S(Settings):
+        w: float = setting(2.0, "weight", min=0.0, unit="1/m", live=True)
+        kind: str = setting("a", "kind", choices=("a", "b"))
+        drag: float = setting(math.inf, "drag time; 0 = none", min=0.1, max=10.0, sentinel=(0.0, math.inf),
+                              param="drag_time")
+    w, kind, drag = params_from_dataclass(S)
     assert (w.name, w.default, w.min, w.max, w.live) == ("w", 2.0, 0.0, None, True)
     assert w.description == "weight [1/m]" and kind.choices == ("a", "b") and not kind.live
     assert w.problem(-1.0) and not w.problem(5.0)
+    # the sentinel: the parameter shows 0 (allowed), the core holds inf
+    assert (drag.name, drag.default, drag.min, drag.max) == ("drag_time", 0.0, 0.0, 10.0)
+    assert drag.problem(0.0) is None and drag.problem(11.0)
+    back = from_params(S, {"w": 3.0, "kind": "b", "drag_time": 0.0})
+    assert (back.w, back.kind, back.drag) == (3.0, "b", math.inf)
+    assert from_params(S, {"drag_time": 2.0}).drag == 2.0
+    with pytest.raises(ValueError, match="drag=0.05 is below its minimum 0.1"):
+        from_params(S, {"drag_time": 0.05})      # inside the descriptor's range, refused by the core
 
 
 def test_topic_parameters_hold_valid_topic_names():

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .settings import PlannerSettings
-from .tree_search import MAX_DEPTH, CostWeights, path_cost, search
+from .tree_search import path_cost, search
 from frog_common.se2 import world_to_body
 
 
@@ -86,21 +86,8 @@ class Decision:
     yaw_rate_cost: float = 0.0
 
 
-_DEFAULTS = PlannerSettings()
-
-#: Default heading look-ahead [m]: chosen on the DER simulator (see ``Planner``).
-DEFAULT_HEADING_LOOKAHEAD = _DEFAULTS.heading_lookahead
-
-#: Default velocity look-ahead [s]: chosen on the DER simulator (see ``Planner``).
-DEFAULT_VELOCITY_LOOKAHEAD = _DEFAULTS.velocity_lookahead
-
-#: Below this planar speed [m/s] and yaw rate [rad/s] the robot counts as standing still.
-DEFAULT_STALL_SPEED = _DEFAULTS.stall_speed
+#: Below this yaw rate [rad/s] (and ``stall_speed``) the robot counts as standing still.
 STALL_YAW_RATE = 0.01
-
-#: Keyword arguments of :class:`Planner` that give the paper's exact cost: eq. 19 at the leaf
-#: with the paper's weights and the heading error against the path tangent.
-PAPER_COST = {k: v for k, v in PlannerSettings.paper().planner_kwargs().items() if k != "depth"}
 
 
 def _vector(value, name, unit):
@@ -119,36 +106,32 @@ class Planner:
     ----------
     model : frog_planner.core.transition_model.TransitionModel
     path : frog_planner.core.paths.Path
-    weights : CostWeights
-        Eq. 19 weights (default: the paper's 500, 50, 300).
-    depth : int
-        Search depth H, 1-5 (the paper found 1 best on hardware).
-    heading_lookahead : float
-        0 (the paper): heading error against the path tangent; > 0 (m): against the direction
-        to the path point this far ahead of the closest one (see :func:`path_cost`).
-        Default 0.1 m (``DEFAULT_HEADING_LOOKAHEAD``): on the simulated frog, whose yaw rate
-        builds up and persists over several periods, the tangent makes depth 1 turn too late
-        (closed loop, default library: sine 8-19 cm and ellipse 40-90 cm mean distance with
-        the tangent, about 3 and 7 cm with 0.1 m). ``Planner(model, path, **PAPER_COST)``
-        runs the paper's exact cost.
-    velocity_lookahead : float
-        0 (the paper): cost at the predicted leaf pose. > 0 (s): cost at the leaf pose
-        extrapolated by its predicted velocities over this time (see :func:`search`).
-        Default 1.5 s (``DEFAULT_VELOCITY_LOOKAHEAD``): the frog side-slips and keeps turning
-        for seconds after a kick, which the pose one period ahead does not show.
-    yaw_rate_weight : float
-        w_r per rad/s; 0 (the paper) leaves it out. > 0 adds w_r * |predicted yaw rate -
-        path curvature * predicted forward speed| at the leaf (see :func:`search`).
+    settings : PlannerSettings
+        How to decide (checked when built; ``PlannerSettings.paper()`` is the paper's exact
+        cost). The fields used here:
+
+        - ``w_distance``, ``w_heading``, ``w_progress``: eq. 19 weights (paper: 500, 50, 300);
+        - ``depth``: search depth H, 1-5 (the paper found 1 best on hardware);
+        - ``heading_lookahead``: 0 (the paper) is the heading error against the path tangent;
+          > 0 (m) against the direction to the path point this far ahead of the closest one
+          (see :func:`path_cost`). Default 0.1 m: on the simulated frog, whose yaw rate builds
+          up and persists over several periods, the tangent makes depth 1 turn too late
+          (closed loop, default library: sine 8-19 cm and ellipse 40-90 cm mean distance with
+          the tangent, about 3 and 7 cm with 0.1 m);
+        - ``velocity_lookahead``: 0 (the paper) costs the predicted leaf pose; > 0 (s) the leaf
+          pose extrapolated by its predicted velocities over this time (see :func:`search`).
+          Default 1.5 s: the frog side-slips and keeps turning for seconds after a kick, which
+          the pose one period ahead does not show;
+        - ``yaw_rate_weight``: w_r per rad/s; 0 (the paper) leaves it out. > 0 adds w_r *
+          |predicted yaw rate - path curvature * predicted forward speed| at the leaf;
+        - ``stall_speed``: m/s; 0 (the paper) disables. When the robot stands still (planar
+          speed below this, yaw rate below 0.01 rad/s) short of the goal and the cheapest
+          sequence starts with the no-action primitive, the cheapest sequence starting with an
+          action is taken instead: from rest, no action leaves the state and therefore the
+          decision unchanged, so the planner would wait forever.
     expander : callable, optional
         Replaces the library's predictions in the search (see :func:`search`); ``model`` then
         only names the primitives.
-    stall_speed : float
-        m/s; 0 (the paper) disables. When the robot stands still (planar speed below this,
-        yaw rate below 0.01 rad/s) short of the goal and the cheapest sequence starts with
-        the no-action primitive, the cheapest sequence starting with an action is taken
-        instead: from rest, no action leaves the state and therefore the decision unchanged,
-        so the planner would wait forever (a cost that weighs heading or distance strongly
-        against progress makes every first kick look worse than waiting at a curved start).
 
     Examples
     --------
@@ -158,31 +141,19 @@ class Planner:
     (1, 'B')
     """
 
-    def __init__(self, model, path, weights=CostWeights(), depth=1, heading_lookahead=DEFAULT_HEADING_LOOKAHEAD,
-                 velocity_lookahead=DEFAULT_VELOCITY_LOOKAHEAD, yaw_rate_weight=0.0, expander=None,
-                 stall_speed=DEFAULT_STALL_SPEED):
-        if not isinstance(weights, CostWeights):
-            weights = CostWeights(*weights)
-        depth = int(depth)
-        if not 1 <= depth <= MAX_DEPTH:
-            raise ValueError(f"search depth {depth} is out of range; expected 1-{MAX_DEPTH}")
+    def __init__(self, model, path, settings: PlannerSettings = PlannerSettings(), expander=None):
+        if not isinstance(settings, PlannerSettings):
+            raise TypeError(f"settings is a {type(settings).__name__}; expected PlannerSettings")
         self.model = model
         self.path = path
-        self.weights = weights
-        self.depth = depth
-        if not (np.isfinite(heading_lookahead) and heading_lookahead >= 0.0):
-            raise ValueError(f"heading_lookahead {heading_lookahead} m must be a finite number >= 0")
-        self.heading_lookahead = float(heading_lookahead)
-        if not (np.isfinite(velocity_lookahead) and velocity_lookahead >= 0.0):
-            raise ValueError(f"velocity_lookahead {velocity_lookahead} s must be a finite number >= 0")
-        self.velocity_lookahead = float(velocity_lookahead)
-        if not (np.isfinite(yaw_rate_weight) and yaw_rate_weight >= 0.0):
-            raise ValueError(f"yaw_rate_weight {yaw_rate_weight} must be a finite number >= 0")
-        self.yaw_rate_weight = float(yaw_rate_weight)
+        self.settings = settings
+        self.weights = settings.weights
+        self.depth = settings.depth
+        self.heading_lookahead = settings.heading_lookahead
+        self.velocity_lookahead = settings.velocity_lookahead
+        self.yaw_rate_weight = settings.yaw_rate_weight
+        self.stall_speed = settings.stall_speed
         self.expander = expander
-        if not (np.isfinite(stall_speed) and stall_speed >= 0.0):
-            raise ValueError(f"stall_speed {stall_speed} m/s must be a finite number >= 0")
-        self.stall_speed = float(stall_speed)
         bits = getattr(model, "primitive_bits", None)
         idle = [i for i, b in enumerate(bits or []) if set(b) <= {"0"}]
         self._idle = idle[0] if idle else None

@@ -4,10 +4,9 @@
 and the main job build their command-line options from them, and the planner is built
 from an instance, so a setting has one default and one range everywhere.
 
-Field metadata (read by :func:`add_arguments` and by soft_robot_common's
-``params_from_dataclass``): ``description``, ``range`` (inclusive; None = open),
-``unit``, ``choices``, ``live`` (safe to change while the planner runs) and ``flags``
-(extra command-line spellings kept for compatibility).
+Each field is a frog_common ``setting()`` (read by :func:`add_arguments` and by
+soft_robot_common's ``params_from_dataclass``): ``live`` marks what is safe to change
+while the planner runs; ``flags`` are extra command-line spellings kept for compatibility.
 """
 
 from __future__ import annotations
@@ -15,7 +14,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+
+from frog_common.settings import Settings, describe, from_params, setting
 
 from .paths import path_from_spec
 from .transition_model import LOOKUPS
@@ -24,51 +25,39 @@ from .tree_search import MAX_DEPTH, CostWeights
 PATH_TYPES = ("line", "sine", "ellipse", "waypoints")
 
 
-def _setting(default, description, range=(None, None), unit="", live=False, choices=None, flags=()):
-    md = {"description": description, "range": range, "unit": unit, "live": live, "flags": tuple(flags)}
-    if choices is not None:
-        md["choices"] = tuple(choices)
-    return field(default=default, metadata=md)
-
-
 @dataclass(frozen=True)
-class PlannerSettings:
+class PlannerSettings(Settings):
     """How the planner decides (seed 000, Algorithm 1 and eq. 19, plus this project's options)."""
 
-    period: float = _setting(1.5, "primitive period T (between library samples, transitions are interpolated)",
-                             (0.05, 10.0), "s")
-    depth: int = _setting(1, "tree search depth H (the paper found 1 best on hardware)", (1, MAX_DEPTH),
+    period: float = setting(1.5, "primitive period T (between library samples, transitions are interpolated)",
+                             min=0.05, max=10.0, unit="s")
+    depth: int = setting(1, "tree search depth H (the paper found 1 best on hardware)", min=1, max=MAX_DEPTH,
                           live=True)
-    metric: str = _setting("euclidean", "nearest-neighbour metric: scaled euclidean (KD-tree) or the paper's "
+    metric: str = setting("euclidean", "nearest-neighbour metric: scaled euclidean (KD-tree) or the paper's "
                            "relative metric", choices=("euclidean", "relative"))
-    k_neighbours: int = _setting(1, "nearest library states averaged", (1, 64), flags=("--k",))
-    lookup: str = _setting("si", "nearest-state search: si (the state as it is) or authors_code (as the authors' "
+    k_neighbours: int = setting(1, "nearest library states averaged", min=1, max=64, flags=("--k",))
+    lookup: str = setting("si", "nearest-state search: si (the state as it is) or authors_code (as the authors' "
                            "planner searched their library: its velocity columns in the simulator's frame, x right "
                            "and y forward, its yaw rate in deg/s; for replaying their runs)", choices=LOOKUPS)
-    gradient_correction: bool = _setting(True, "correct the nearest state's transitions to first order for the "
+    gradient_correction: bool = setting(True, "correct the nearest state's transitions to first order for the "
                                          "velocity difference (library-fitted slopes); false = the paper")
-    w_distance: float = _setting(500.0, "eq. 19 weight w_a of the distance to the path", (0.0, 1e6), "1/m",
+    w_distance: float = setting(500.0, "eq. 19 weight w_a of the distance to the path", min=0.0, max=1e6, unit="1/m",
                                  live=True, flags=("--w-a",))
-    w_heading: float = _setting(50.0, "eq. 19 weight w_b of the heading error", (0.0, 1e6), "1/rad", live=True,
-                                flags=("--w-b",))
-    w_progress: float = _setting(300.0, "eq. 19 weight w_c of (1 - progress)", (0.0, 1e6), live=True,
+    w_heading: float = setting(50.0, "eq. 19 weight w_b of the heading error", min=0.0, max=1e6, unit="1/rad",
+                               live=True, flags=("--w-b",))
+    w_progress: float = setting(300.0, "eq. 19 weight w_c of (1 - progress)", min=0.0, max=1e6, live=True,
                                  flags=("--w-c",))
-    heading_lookahead: float = _setting(0.1, "heading error against the path this far ahead; 0 = the paper's "
-                                        "path tangent at the closest point", (0.0, 1.0), "m", live=True)
-    velocity_lookahead: float = _setting(1.5, "cost each leaf pose extrapolated by its predicted velocities "
-                                         "over this time; 0 = the paper (cost at the leaf)", (0.0, 10.0), "s",
-                                         live=True)
-    yaw_rate_weight: float = _setting(0.0, "weight per rad/s of |predicted yaw rate - path curvature x speed| "
-                                      "at the leaf; 0 = the paper", (0.0, 1e6), "s/rad", live=True,
+    heading_lookahead: float = setting(0.1, "heading error against the path this far ahead; 0 = the paper's "
+                                        "path tangent at the closest point", min=0.0, max=1.0, unit="m", live=True)
+    velocity_lookahead: float = setting(1.5, "cost each leaf pose extrapolated by its predicted velocities "
+                                        "over this time; 0 = the paper (cost at the leaf)", min=0.0, max=10.0,
+                                        unit="s", live=True)
+    yaw_rate_weight: float = setting(0.0, "weight per rad/s of |predicted yaw rate - path curvature x speed| "
+                                      "at the leaf; 0 = the paper", min=0.0, max=1e6, unit="s/rad", live=True,
                                       flags=("--w-r",))
-    stall_speed: float = _setting(0.002, "standing still (below this planar speed and 0.01 rad/s) short of the "
+    stall_speed: float = setting(0.002, "standing still (below this planar speed and 0.01 rad/s) short of the "
                                   "goal, never choose 'no action', which would wait forever; 0 = the paper",
-                                  (0.0, 0.1), "m/s", live=True)
-
-    def __post_init__(self):
-        reason = check(self)
-        if reason:
-            raise ValueError(reason)
+                                  min=0.0, max=0.1, unit="m/s", live=True)
 
     @classmethod
     def paper(cls, **overrides) -> "PlannerSettings":
@@ -88,38 +77,30 @@ class PlannerSettings:
         return {"period": self.period, "metric": self.metric, "k": self.k_neighbours,
                 "gradient_correction": self.gradient_correction, "lookup": self.lookup}
 
-    def planner_kwargs(self) -> dict:
-        """Keyword arguments of ``Planner`` (after the model and the path)."""
-        return {"weights": self.weights, "depth": self.depth, "heading_lookahead": self.heading_lookahead,
-                "velocity_lookahead": self.velocity_lookahead, "yaw_rate_weight": self.yaw_rate_weight,
-                "stall_speed": self.stall_speed}
-
 
 @dataclass(frozen=True)
-class PathSettings:
+class PathSettings(Settings):
     """The reference path (eq. 15-17 or a waypoint CSV), placed in the world frame."""
 
-    path_type: str = _setting("line", "reference path: line, sine, ellipse (paper eq. 15-17) or waypoints",
+    path_type: str = setting("line", "reference path: line, sine, ellipse (paper eq. 15-17) or waypoints",
                               choices=PATH_TYPES, live=True)
-    path_length: float = _setting(0.0, "path length/size; 0 = the paper's value for the path type", (0.0, 100.0),
-                                  "m", live=True)
-    path_start_x: float = _setting(0.0, "path start x in the world frame", (-1e3, 1e3), "m", live=True)
-    path_start_y: float = _setting(0.0, "path start y in the world frame", (-1e3, 1e3), "m", live=True)
-    path_heading: float = _setting(0.0, "direction of the path at its start", (-2 * math.pi, 2 * math.pi), "rad",
-                                   live=True)
-    waypoint_file: str = _setting("", "CSV with header x,y [m] in the world frame (path_type waypoints)", live=True)
-    goal_tolerance: float = _setting(0.03, "distance to the path's end that counts as reached", (1e-4, 1.0), "m",
-                                     live=True)
-    goal_lateral_tolerance: float = _setting(0.0, "crossing the finish line (normal at the path's end) counts "
+    path_length: float = setting(0.0, "path length/size; 0 = the paper's value for the path type", min=0.0,
+                                 max=100.0, unit="m", live=True)
+    path_start_x: float = setting(0.0, "path start x in the world frame", min=-1e3, max=1e3, unit="m", live=True)
+    path_start_y: float = setting(0.0, "path start y in the world frame", min=-1e3, max=1e3, unit="m", live=True)
+    path_heading: float = setting(0.0, "direction of the path at its start", min=-2 * math.pi, max=2 * math.pi,
+                                  unit="rad", live=True)
+    waypoint_file: str = setting("", "CSV with header x,y [m] in the world frame (path_type waypoints)", live=True)
+    goal_tolerance: float = setting(0.03, "distance to the path's end that counts as reached", min=1e-4, max=1.0,
+                                    unit="m", live=True)
+    goal_lateral_tolerance: float = setting(0.0, "crossing the finish line (normal at the path's end) counts "
                                              "only this close to the end along that line; 0 = goal_tolerance",
-                                             (0.0, 1.0), "m", live=True)
+                                             min=0.0, max=1.0, unit="m", live=True)
 
-    def __post_init__(self):
-        reason = check(self)
-        if reason:
-            raise ValueError(reason)
+    def cross_check(self) -> str | None:
         if self.path_type == "waypoints" and not self.waypoint_file:
-            raise ValueError("path_type waypoints needs waypoint_file (CSV with columns x,y in m)")
+            return "path_type waypoints needs waypoint_file (CSV with columns x,y in m)"
+        return None
 
     def build(self):
         """The :class:`~frog_planner.core.paths.Path` (raises ValueError/OSError for a bad waypoint file)."""
@@ -130,23 +111,6 @@ class PathSettings:
                               heading=self.path_heading, waypoint_file=self.waypoint_file or None, **kw)
 
 
-def check(settings) -> str | None:
-    """Why an instance's values are out of their declared range or choices, or None."""
-    for f in dataclasses.fields(settings):
-        value = getattr(settings, f.name)
-        lo, hi = f.metadata.get("range", (None, None))
-        if isinstance(value, float) and not math.isfinite(value):
-            return f"{f.name} = {value!r} must be finite"
-        if lo is not None and value < lo:
-            return f"{f.name} = {value!r} is below its minimum {lo!r}"
-        if hi is not None and value > hi:
-            return f"{f.name} = {value!r} is above its maximum {hi!r}"
-        choices = f.metadata.get("choices")
-        if choices is not None and value not in choices:
-            return f"{f.name} = {value!r} is not one of {', '.join(map(repr, choices))}"
-    return None
-
-
 def add_arguments(parser: argparse.ArgumentParser, cls, exclude=()) -> None:
     """Add one command-line option per field of ``cls`` (``--w-distance``; ``flags`` as aliases)."""
     group = parser.add_argument_group(f"{cls.__name__} (defaults, ranges and units from frog_planner.core.settings)")
@@ -154,8 +118,8 @@ def add_arguments(parser: argparse.ArgumentParser, cls, exclude=()) -> None:
         if f.name in exclude:
             continue
         md = f.metadata
-        lo, hi = md.get("range", (None, None))
-        text = md["description"] + (f" [{md['unit']}]" if md.get("unit") else "")
+        lo, hi = md["min"], md["max"]
+        text = describe(f)
         if lo is not None or hi is not None:
             text += f"; range {lo if lo is not None else '-inf'} to {hi if hi is not None else 'inf'}"
         text += f" (default {f.default!r})"
@@ -171,11 +135,4 @@ def add_arguments(parser: argparse.ArgumentParser, cls, exclude=()) -> None:
 
 def from_arguments(cls, args: argparse.Namespace, **overrides):
     """An instance of ``cls`` from the parsed options (``overrides`` win); ValueError if out of range."""
-    values = {f.name: getattr(args, f.name) for f in dataclasses.fields(cls) if hasattr(args, f.name)}
-    values.update(overrides)
-    return cls(**values)
-
-
-def as_dict(settings) -> dict:
-    """``{field: value}`` of an instance (e.g. as ROS parameters for ``planner_node``)."""
-    return {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)}
+    return from_params(cls, vars(args), **overrides)

@@ -58,6 +58,7 @@ from frog_planner.core.feasibility import radius_ahead, steady_turns, tight_stre
 from frog_common.motion_library_file import LibraryFormatError
 from frog_planner.core.planner import Planner
 from frog_planner.core.settings import PathSettings, PlannerSettings
+from frog_common.settings import from_params
 from frog_planner.core.state_window import StateWindow
 from frog_planner.core.transition_model import TransitionModel
 from frog_planner.nodes.rollout_client import RolloutClient, lead_time
@@ -99,19 +100,13 @@ _NODE_PARAMS = [
 ]
 _PLANNER_PARAMS = params_from_dataclass(PlannerSettings)
 _PATH_PARAMS = params_from_dataclass(PathSettings)
-_PLANNER_FIELDS = {r.name for r in _PLANNER_PARAMS}
-_PATH_FIELDS = {r.name for r in _PATH_PARAMS}
-
-
-def _settings(cls, values: dict, fields: set):
-    return cls(**{k: v for k, v in values.items() if k in fields})
 
 
 def _check_settings(values: dict) -> str | None:
     """Cross-checks of a candidate parameter set (ranges are checked per parameter)."""
     try:
-        _settings(PathSettings, values, _PATH_FIELDS)
-        _settings(PlannerSettings, values, _PLANNER_FIELDS)
+        from_params(PathSettings, values)
+        from_params(PlannerSettings, values)
     except ValueError as exc:
         return str(exc)
     if values.get("transitions") == "simulator" and values.get("replan_interval", 0.0) > 0:
@@ -133,8 +128,8 @@ class PlannerNode(Node):
         self.cfg = declare_parameters(self, _NODE_PARAMS + _PLANNER_PARAMS + _PATH_PARAMS,
                                       validate=_check_settings, on_change=self.on_parameters)
         p = self.cfg
-        self.settings = _settings(PlannerSettings, p, _PLANNER_FIELDS)
-        self.path_settings = _settings(PathSettings, p, _PATH_FIELDS)
+        self.settings = from_params(PlannerSettings, p)
+        self.path_settings = from_params(PathSettings, p)
         try:
             self.path = self.path_settings.build()
         except (ValueError, OSError) as exc:
@@ -199,7 +194,7 @@ class PlannerNode(Node):
         else:
             try:
                 self.model = TransitionModel.load(p["library_file"], **self.settings.model_kwargs())
-                self.planner = Planner(self.model, self.path, **self.settings.planner_kwargs())
+                self.planner = Planner(self.model, self.path, self.settings)
                 self.library_error = None
                 self.limits = turning_limits(steady_turns(self.model, self.settings.period))
                 self.get_logger().info(f"library {p['library_file']}: {self.model.n_states} states, "
@@ -235,7 +230,7 @@ class PlannerNode(Node):
     def on_parameters(self, changed: dict) -> None:
         """Apply live changes: planner settings keep the progress, a new path starts over."""
         p = self.cfg
-        self.settings = _settings(PlannerSettings, p, _PLANNER_FIELDS)
+        self.settings = from_params(PlannerSettings, p)
         if "library_file" in changed:
             progress = self.planner.progress if self.planner is not None else 0.0
             self.model = self.planner = self.limits = None
@@ -243,13 +238,13 @@ class PlannerNode(Node):
             if self.planner is not None:
                 self.planner.reset(progress)
             return
-        if changed.keys() & _PATH_FIELDS:
+        if changed.keys() & {r.name for r in _PATH_PARAMS}:
             try:
-                self.path = _settings(PathSettings, p, _PATH_FIELDS).build()
+                self.path = from_params(PathSettings, p).build()
             except (ValueError, OSError) as exc:
                 self.get_logger().error(f"new path not usable ({exc}); keeping the {self.path.name} path")
                 return
-            self.path_settings = _settings(PathSettings, p, _PATH_FIELDS)
+            self.path_settings = from_params(PathSettings, p)
             self.goal_reached = False
             self.publish_path()
             if self.limits is not None:
@@ -258,7 +253,7 @@ class PlannerNode(Node):
         else:
             progress = self.planner.progress if self.planner is not None else 0.0
         if self.model is not None:
-            self.planner = Planner(self.model, self.path, **self.settings.planner_kwargs())
+            self.planner = Planner(self.model, self.path, self.settings)
             self.planner.reset(progress)
 
     def publish_path(self) -> None:

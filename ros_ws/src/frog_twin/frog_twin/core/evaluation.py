@@ -21,10 +21,9 @@ import numpy as np
 
 from frog_common.primitives import primitive_name
 from frog_planner.core.paths import Path, ellipse_path, line_path, sinusoid_path
-from frog_planner.core.planner import (DEFAULT_HEADING_LOOKAHEAD, DEFAULT_STALL_SPEED, DEFAULT_VELOCITY_LOOKAHEAD,
-                                      Planner)
+from frog_planner.core.planner import Planner
+from frog_planner.core.settings import PlannerSettings
 from frog_planner.core.transition_model import TransitionModel
-from frog_planner.core.tree_search import CostWeights
 
 from .metrics import samples_before_finish  # noqa: F401  (re-exported for callers of this module)
 
@@ -85,15 +84,10 @@ class ClosedLoopResult:
     metrics: dict = field(default_factory=dict)
 
 
-def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
-                    weights: CostWeights = CostWeights(), period: float = 1.5,
+def run_closed_loop(path: Path, model: TransitionModel, settings: PlannerSettings = PlannerSettings(),
                     max_time: Optional[float] = None, start_offset=(0.0, 0.0, 0.0),
                     sim_params: Optional[dict] = None, sample_interval: float = 0.05,
-                    heading_lookahead: float = DEFAULT_HEADING_LOOKAHEAD,
-                    velocity_lookahead: float = DEFAULT_VELOCITY_LOOKAHEAD,
-                    yaw_rate_weight: float = 0.0,
-                    simulation=None, transitions: str = "library",
-                    stall_speed: float = DEFAULT_STALL_SPEED) -> ClosedLoopResult:
+                    simulation=None, transitions: str = "library") -> ClosedLoopResult:
     """Follow ``path`` with the simulated frog until the goal or ``max_time``.
 
     Parameters
@@ -101,12 +95,9 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     path : Path
     model : TransitionModel
         Built for ``period``.
-    depth : int
-        Tree depth H.
-    weights : CostWeights
-        Eq. 19 weights.
-    period : float
-        Primitive period T [s].
+    settings : PlannerSettings
+        The planner's settings (depth, eq. 19 weights, look-aheads, stall speed; see
+        :class:`~frog_planner.core.planner.Planner`) and the primitive period T [s].
     max_time : float, optional
         Give up after this long [s] (default: time to cover the path at 0.5 cm/s).
     start_offset : (float, float, float)
@@ -114,20 +105,11 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
         heading [rad], in the frame of the path's initial tangent.
     sim_params : dict, optional
         FrogParameters overrides for the simulator.
-    heading_lookahead : float
-        Heading error against the path this far ahead [m] (0 = the paper's tangent; default 0.1).
-    velocity_lookahead : float
-        Cost the leaves extrapolated by their predicted velocities over this time [s]
-        (0 = the paper: cost at the predicted leaf pose; default 1.5).
-    yaw_rate_weight : float
-        w_r per rad/s of |predicted yaw rate - path curvature * forward speed| (0 = the paper).
     simulation : FrogSimulation, optional
         Reuse a simulator (it is reset).
     transitions : {'library', 'simulator'}
         Predictions of the search: the motion library (the paper) or exact ones from copies
         of the running simulator (:func:`simulator_expander`; depth <= 2, slow).
-    stall_speed : float
-        See :class:`~frog_planner.core.planner.Planner` (0 = the paper).
 
     Returns
     -------
@@ -144,10 +126,9 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     sim.set_pose(float(x0[0]), float(x0[1]), h0 + start_offset[2])
     if transitions not in TRANSITION_SOURCES:
         raise ValueError(f"transitions {transitions!r} unknown; expected one of {TRANSITION_SOURCES}")
+    period = settings.period
     expander = simulator_expander(sim, period, model.n_primitives) if transitions == "simulator" else None
-    planner = Planner(model, path, weights, depth, heading_lookahead=heading_lookahead,
-                      velocity_lookahead=velocity_lookahead, yaw_rate_weight=yaw_rate_weight, expander=expander,
-                      stall_speed=stall_speed)
+    planner = Planner(model, path, settings, expander=expander)
     max_time = max_time or path.length / 0.005
     stride = int(round(sample_interval / sim.time_step))
     steps_per_period = int(round(period / sim.time_step))
@@ -195,13 +176,13 @@ def run_closed_loop(path: Path, model: TransitionModel, depth: int = 1,
     progress = decisions[-1]["progress"] if decisions else 0.0
     end = goal_time if goal_time is not None else float(t[-1])
     metrics = {
-        "path": path.name, "path_length_m": path.length, "depth": depth, "period_s": period,
+        "path": path.name, "path_length_m": path.length, "depth": settings.depth, "period_s": period,
         "transitions": transitions, "metric": model.metric if transitions == "library" else "exact",
         "k_neighbours": model.k,
-        "gradient_correction": model.gradient_correction, "heading_lookahead_m": heading_lookahead,
-        "velocity_lookahead_s": velocity_lookahead, "yaw_rate_weight": yaw_rate_weight,
-        "stall_speed_m_per_s": stall_speed,
-        "weights": [weights.distance, weights.heading, weights.progress],
+        "gradient_correction": model.gradient_correction, "heading_lookahead_m": settings.heading_lookahead,
+        "velocity_lookahead_s": settings.velocity_lookahead, "yaw_rate_weight": settings.yaw_rate_weight,
+        "stall_speed_m_per_s": settings.stall_speed,
+        "weights": [settings.w_distance, settings.w_heading, settings.w_progress],
         "goal_reached": goal_time is not None,
         "completion_time_s": goal_time,
         "final_progress": progress,
