@@ -231,3 +231,11 @@ def test_watchdog_cancels_the_pending_rear_pulse_on_a_fake_clock():
     assert written == [] and s.counts[CANCELLED_WATCHDOG] == 1 and w.tripped
     assert s.submit_primitive(B, 11.0, 11.0).accepted and w.fed(11.0)
     assert run(s, 11.0) + run(s, 11.5) == [(11.0, (1, 0)), (11.5, (2, 3))]
+
+
+@pytest.mark.parametrize("kw, message", [({"max_duty_cycle": 0.0}, "max_duty_cycle=0.0 is below its minimum 0.001"),
+                                         ({"min_limb_interval_s": float("nan")}, "min_limb_interval_s=nan must be"),
+                                         ({"duty_window_s": 0.05}, "duty_window_s=0.05 is below its minimum 0.1")])
+def test_protection_limits_out_of_range_are_refused_by_name(kw, message):
+    with pytest.raises(ValueError, match=message):
+        ProtectionConfig(**kw)

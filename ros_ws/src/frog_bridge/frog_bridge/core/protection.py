@@ -15,42 +15,24 @@ package README (frog_bridge/README.md, "Limb protection") and in :data:`DEFAULTS
 from __future__ import annotations
 
 import itertools
-import math
 from collections import deque
 from dataclasses import dataclass
 
 from frog_common.primitives import LIMB_NAMES
+from frog_common.settings import Settings, setting
 
 _EPS = 1e-9
 
 
 @dataclass(frozen=True)
-class ProtectionConfig:
-    """Per-limb heating limits.
+class ProtectionConfig(Settings):
+    """Per-limb heating limits (bridge_node's parameters of the same names)."""
 
-    Attributes
-    ----------
-    min_limb_interval_s : float
-        Shortest time between two pulse starts on one limb [s].
-    max_duty_cycle : float
-        Largest heated fraction of any ``duty_window_s`` window, 0-1.
-    duty_window_s : float
-        Length of the duty-cycle window [s].
-    """
-
-    min_limb_interval_s: float = 0.8
-    max_duty_cycle: float = 0.10
-    duty_window_s: float = 10.0
-
-    def problem(self) -> str | None:
-        """Why this configuration is unusable, or None."""
-        if not (math.isfinite(self.min_limb_interval_s) and self.min_limb_interval_s >= 0):
-            return f"min_limb_interval_s {self.min_limb_interval_s!r} must be >= 0"
-        if not (0 < self.max_duty_cycle <= 1):
-            return f"max_duty_cycle {self.max_duty_cycle!r} must be in (0, 1]"
-        if not (math.isfinite(self.duty_window_s) and self.duty_window_s > 0):
-            return f"duty_window_s {self.duty_window_s!r} must be > 0"
-        return None
+    min_limb_interval_s: float = setting(0.8, "shortest time between two pulses of one limb (10 vol% EGaIn "
+                                         "limbs: 1.2 Hz max)", min=0.0, max=60.0, unit="s")
+    max_duty_cycle: float = setting(0.10, "largest heated fraction of any duty_window_s, per limb",
+                                    min=0.001, max=1.0)
+    duty_window_s: float = setting(10.0, "window of the duty-cycle bound", min=0.1, max=3600.0, unit="s")
 
 
 # Defaults for the authors' hardware (10 vol% EGaIn limbs, 80 ms pulses): the fastest cycle
@@ -72,10 +54,7 @@ class LimbGuard:
     """Remembers the pulses written per limb and refuses pulses that break the limits."""
 
     def __init__(self, config: ProtectionConfig = DEFAULTS):
-        problem = config.problem()
-        if problem:
-            raise ValueError(problem)
-        self.config = config
+        self.config = config              # checked when it was built
         self._history: dict[int, deque[tuple[float, float]]] = {i: deque() for i in range(len(LIMB_NAMES))}
 
     def last_start(self, limb: int) -> float | None:

@@ -29,13 +29,15 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
-from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
+from soft_robot_common import (ConfigurationError, MessageGate, Param, declare_parameters, params_from_dataclass,
+                                run_node)
 from std_msgs.msg import Empty
 from std_srvs.srv import Trigger
 
 from frog_common.primitives import PRIMITIVE_NAMES, limb_label
+from frog_common.settings import from_params
 from frog_bridge.core.link import LinkState, LinkSupervisor
-from frog_bridge.core.protection import DEFAULTS, LimbGuard, ProtectionConfig
+from frog_bridge.core.protection import LimbGuard, ProtectionConfig
 from frog_bridge.core.protocol import (
     QUATERNION_ORDERS, DecodeError, Emergency, LineFramer, Quaternion, RelayText, decode_relay_line,
     encode_heat, encode_set_pulse, excerpt)
@@ -50,11 +52,7 @@ PARAMS = [
     Param("baud", 115200, "baud rate", min=1200, max=4_000_000),
     Param("pulse_ms", 80, "SMA heating pulse length sent once with 'p' [ms]; also the front-to-rear delay",
           min=10, max=500),
-    Param("min_limb_interval_s", DEFAULTS.min_limb_interval_s,
-          "shortest time between two pulses of one limb [s] (10 vol% EGaIn limbs: 1.2 Hz max)", min=0.0, max=60.0),
-    Param("max_duty_cycle", DEFAULTS.max_duty_cycle, "largest heated fraction of any duty_window_s, per limb",
-          min=0.001, max=1.0),
-    Param("duty_window_s", DEFAULTS.duty_window_s, "window of the duty-cycle bound [s]", min=0.1, max=3600.0),
+] + params_from_dataclass(ProtectionConfig) + [
     Param("max_command_age_s", 0.5, "commands older than this (header stamp) are dropped, never replayed [s]",
           min=0.01, max=60.0),
     Param("reconnect_period_s", 0.5, "first retry after the device is lost or fails to open [s]",
@@ -87,7 +85,11 @@ def _validate(p: dict) -> str | None:
     if p["reconnect_max_period_s"] < p["reconnect_period_s"]:
         return (f"reconnect_max_period_s {p['reconnect_max_period_s']} must be >= reconnect_period_s "
                 f"{p['reconnect_period_s']}")
-    return ProtectionConfig(p["min_limb_interval_s"], p["max_duty_cycle"], p["duty_window_s"]).problem()
+    try:
+        from_params(ProtectionConfig, p)
+    except ValueError as exc:
+        return str(exc)
+    return None
 
 
 def _stamp_s(stamp) -> float | None:
@@ -111,7 +113,7 @@ class BridgeNode(Node):
         self.pulse_s = p["pulse_ms"] / 1000.0
         try:
             self.scheduler = CommandScheduler(
-                LimbGuard(ProtectionConfig(p["min_limb_interval_s"], p["max_duty_cycle"], p["duty_window_s"])),
+                LimbGuard(from_params(ProtectionConfig, p)),
                 self.pulse_s, p["max_command_age_s"])
             self.supervisor = LinkSupervisor(p["reconnect_period_s"], p["reconnect_max_period_s"],
                                              p["settle_s"], p["stall_timeout_s"])

@@ -18,9 +18,10 @@ import numpy as np
 
 from frog_vision.core.camera_model import CameraModel
 from frog_vision.core.robot_shape import BODY_FRAME_WIDTH, BODY_SIDE, LIMB_WIDTH, RobotShape, frog_outline
-from frog_vision.core.tag_images import tag_border_cells, tag_image
+from frog_vision.core.tag_images import FAMILIES, tag_border_cells, tag_image
 from frog_vision.core.tank_calibration import Board, CameraPose
 from frog_common.se2 import twist_arc
+from frog_common.settings import Settings, setting
 
 _CELL_PX = 8           # texture pixels per tag cell
 #: Corner jitter that gives the authors' measured pose noise at rest (see RenderSettings).
@@ -28,7 +29,7 @@ AUTHORS_CORNER_JITTER_PX = 0.2
 
 
 @dataclasses.dataclass(frozen=True)
-class RenderSettings:
+class RenderSettings(Settings):
     """Settings of :class:`TankRenderer`.
 
     Attributes
@@ -60,37 +61,23 @@ class RenderSettings:
         Of the noise, frame drops and the water texture.
     """
 
-    tag_family: str = "tagStandard41h12"
-    tag_id: int = 47
-    tag_size: float = 0.047
-    tag_height: float = 0.0
-    exposure: float = 0.010
-    blur_samples: int = 5
-    noise_sigma: float = 2.0
-    brightness: float = 1.0
-    lighting: float = 0.3
-    corner_jitter_px: float = 0.0
-    supersample: int = 2
-    drop_probability: float = 0.0
-    seed: int = 0
-
-    def __post_init__(self):
-        if not 0 <= self.exposure <= 0.2:
-            raise ValueError(f"exposure = {self.exposure!r} s must be in [0, 0.2]")
-        if not 1 <= int(self.blur_samples) <= 32:
-            raise ValueError(f"blur_samples = {self.blur_samples!r} must be in 1-32")
-        if not 0 <= self.noise_sigma <= 50:
-            raise ValueError(f"noise_sigma = {self.noise_sigma!r} must be in [0, 50]")
-        if not 0.05 <= self.brightness <= 2:
-            raise ValueError(f"brightness = {self.brightness!r} must be in [0.05, 2]")
-        if not 0 <= self.lighting < 1:
-            raise ValueError(f"lighting = {self.lighting!r} must be in [0, 1)")
-        if not 0 <= self.corner_jitter_px <= 5:
-            raise ValueError(f"corner_jitter_px = {self.corner_jitter_px!r} must be in [0, 5]")
-        if not 1 <= int(self.supersample) <= 4:
-            raise ValueError(f"supersample = {self.supersample!r} must be in 1-4")
-        if not 0 <= self.drop_probability < 1:
-            raise ValueError(f"drop_probability = {self.drop_probability!r} must be in [0, 1)")
+    tag_family: str = setting("tagStandard41h12", "AprilTag family of the robot's tag", choices=FAMILIES)
+    tag_id: int = setting(47, "id of the robot's tag (other ids are ignored)", min=0, max=100000)
+    tag_size: float = setting(0.047, "edge of the tag's detected square", min=0.005, max=1.0, unit="m")
+    tag_height: float = setting(0.0, "height of the tag face above the board plane z = 0", min=-0.5, max=0.5,
+                                unit="m")
+    exposure: float = setting(0.010, "exposure time (motion blur)", min=0.0, max=0.2, unit="s")
+    blur_samples: int = setting(5, "poses averaged over the exposure", min=1, max=32)
+    noise_sigma: float = setting(2.0, "sensor noise", min=0.0, max=50.0, unit="grey levels")
+    brightness: float = setting(1.0, "global lighting gain", min=0.05, max=2.0)
+    lighting: float = setting(0.3, "uneven lighting: gain drop from the hot spot to the darkest corner",
+                              min=0.0, max=0.99)
+    corner_jitter_px: float = setting(0.0, "per-frame random tag displacement (vibration, ripples); "
+                                      f"{AUTHORS_CORNER_JITTER_PX} gives the authors' measured pose noise, "
+                                      "0 = an ideal camera", min=0.0, max=5.0, unit="px")
+    supersample: int = setting(2, "resolution factor of the robot's region (anti-aliasing)", min=1, max=4)
+    drop_probability: float = setting(0.0, "chance that a frame is lost", min=0.0, max=0.99, live=True)
+    seed: int = setting(0, "random seed (noise, drops, water texture)", min=0, max=2**31 - 1)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -37,55 +37,65 @@ starts again from the next measurement. All times are the image capture stamps [
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 from frog_common.se2 import twist_arc
 from frog_common.se2 import wrap_angle
+from frog_common.settings import Settings, setting
 
 #: Chi-square 99.9 % quantile with 3 degrees of freedom.
 CHI2_3DOF_999 = 16.27
 
 
 @dataclasses.dataclass(frozen=True)
-class FilterSettings:
-    """Settings of :class:`PoseFilter` (see the module docstring)."""
+class FilterSettings(Settings):
+    """Settings of :class:`PoseFilter` (see the module docstring); tracker_node's parameters."""
 
-    accel_noise: float = 3e-5
-    yaw_accel_noise: float = 0.01
-    gate_chi2: float = CHI2_3DOF_999
-    gate_floor_m: float = 0.003        # never gate closer than this (position) [m]
-    gate_floor_rad: float = 0.05       # ... and this (heading) [rad]
-    jump_confirmations: int = 3        # consecutive out-of-gate measurements that restart the filter
-    coast_timeout: float = 0.5         # [s] keep publishing predictions this long
-    reset_timeout: float = 1.0         # [s] forget the state after this long without a measurement
-    initial_speed_sigma: float = 0.05  # [m/s] initial velocity uncertainty
-    initial_yaw_rate_sigma: float = 1.0  # [rad/s]
+    accel_noise: float = setting(3e-5, "filter: linear acceleration noise density", min=1e-9, max=100.0,
+                                 unit="(m/s^2)^2/Hz", live=True)
+    yaw_accel_noise: float = setting(0.01, "filter: yaw acceleration noise density", min=1e-9, max=1000.0,
+                                     unit="(rad/s^2)^2/Hz", live=True)
+    gate_chi2: float = setting(CHI2_3DOF_999, "chi-square gate of a measurement against the prediction",
+                               min=0.1, max=1e4)
+    gate_floor_m: float = setting(0.003, "never gate closer than this (position)", min=0.0, max=1.0, unit="m")
+    gate_floor_rad: float = setting(0.05, "never gate closer than this (heading)", min=0.0, max=3.2, unit="rad")
+    jump_confirmations: int = setting(3, "consecutive out-of-gate measurements that restart the filter",
+                                      min=1, max=100)
+    coast_timeout: float = setting(0.5, "publish predictions this long after the tag is lost", min=1e-3,
+                                   max=10.0, unit="s")
+    reset_timeout: float = setting(1.0, "restart the filter after the tag was lost this long", min=1e-3,
+                                   max=60.0, unit="s")
+    initial_speed_sigma: float = setting(0.05, "initial velocity uncertainty", min=1e-6, max=10.0, unit="m/s")
+    initial_yaw_rate_sigma: float = setting(1.0, "initial yaw rate uncertainty", min=1e-6, max=100.0,
+                                            unit="rad/s")
     # with kick inputs (see the module docstring); tuned on the same rendered sequences with the
     # simulator's firing times (bench/vision_accuracy.py): a window after each pulse start (front
     # limbs, rear limbs 80 ms later) covers the ~0.35 s power stroke
-    kick_window: float = 0.2              # [s] after each firing
-    kick_delay: float = 0.0               # [s] from the firing's stamp to the window (the simulator reacts at
-    #                                       once; raise it for a robot whose stroke lags the write)
-    kick_accel_noise: float = 1e-4        # [(m/s^2)^2/Hz] inside a window
-    kick_yaw_accel_noise: float = 1.0     # [(rad/s^2)^2/Hz]
-    coast_accel_noise: float = 3e-6       # [(m/s^2)^2/Hz] between windows
-    coast_yaw_accel_noise: float = 1e-3   # [(rad/s^2)^2/Hz]
-    coast_drag_time: float = 8.0          # [s] between windows the body velocities decay with this time constant
-    coast_yaw_drag_time: float = 5.0      # [s] ... and the yaw rate with this one (np.inf: no drag)
+    kick_window: float = setting(0.2, "filter with kicks: follow the stroke this long after each firing",
+                                 min=0.01, max=5.0, unit="s", live=True)
+    # the simulator reacts at once; raise it for a robot whose stroke lags the write
+    kick_delay: float = setting(0.0, "filter with kicks: from a firing's stamp to the start of its window",
+                                min=0.0, max=2.0, unit="s", live=True)
+    kick_accel_noise: float = setting(1e-4, "filter with kicks: linear acceleration noise density in a kick "
+                                      "window", min=1e-9, max=100.0, unit="(m/s^2)^2/Hz", live=True)
+    kick_yaw_accel_noise: float = setting(1.0, "filter with kicks: yaw acceleration noise density in a kick "
+                                          "window", min=1e-9, max=1000.0, unit="(rad/s^2)^2/Hz", live=True)
+    coast_accel_noise: float = setting(3e-6, "filter with kicks: linear acceleration noise density between "
+                                       "kicks", min=1e-12, max=100.0, unit="(m/s^2)^2/Hz", live=True)
+    coast_yaw_accel_noise: float = setting(1e-3, "filter with kicks: yaw acceleration noise density between "
+                                           "kicks", min=1e-12, max=1000.0, unit="(rad/s^2)^2/Hz", live=True)
+    coast_drag_time: float = setting(8.0, "filter with kicks: decay time of the body velocities between kicks; "
+                                     "0 = no drag", min=1e-3, max=1000.0, unit="s", live=True,
+                                     sentinel=(0.0, math.inf))
+    coast_yaw_drag_time: float = setting(5.0, "filter with kicks: decay time of the yaw rate between kicks; "
+                                         "0 = no drag", min=1e-3, max=1000.0, unit="s", live=True,
+                                         sentinel=(0.0, math.inf))
 
-    def __post_init__(self):
-        for name in ("accel_noise", "yaw_accel_noise", "gate_chi2", "coast_timeout",
-                     "reset_timeout", "initial_speed_sigma", "initial_yaw_rate_sigma", "kick_window",
-                     "kick_accel_noise", "kick_yaw_accel_noise", "coast_accel_noise", "coast_yaw_accel_noise",
-                     "coast_drag_time", "coast_yaw_drag_time"):
-            v = getattr(self, name)
-            if not (v > 0 and (np.isfinite(v) or name.endswith("drag_time"))):
-                raise ValueError(f"{name} = {v!r} must be > 0")
-        if not (np.isfinite(self.kick_delay) and self.kick_delay >= 0):
-            raise ValueError(f"kick_delay = {self.kick_delay!r} must be >= 0")
+    def cross_check(self) -> str | None:
         if self.reset_timeout < self.coast_timeout:
-            raise ValueError(f"reset_timeout = {self.reset_timeout} must be >= coast_timeout = "
-                             f"{self.coast_timeout}")
+            return f"reset_timeout = {self.reset_timeout} must be >= coast_timeout = {self.coast_timeout}"
+        return None
 
 
 @dataclasses.dataclass(frozen=True)

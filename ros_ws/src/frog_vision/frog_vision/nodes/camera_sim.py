@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import bisect
 import collections
-import dataclasses
 import math
 import sys
 import time
@@ -29,7 +28,8 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
-from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
+from soft_robot_common import (ConfigurationError, MessageGate, Param, declare_parameters, params_from_dataclass,
+                                run_node)
 from visualization_msgs.msg import Marker
 
 from frog_vision.core.camera_model import CameraModel
@@ -41,24 +41,19 @@ from frog_vision.nodes.common import load_camera, load_camera_pose
 from frog_vision.nodes.messages import array_to_image, camera_info_msg, s_to_stamp, stamp_to_s
 from frog_vision.nodes.settings import CAMERA_PARAMS, TAG_PARAMS
 from frog_common.se2 import twist_arc, yaw_of
+from frog_common.settings import from_params
 
-PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
+_RENDER_PARAMS = ("exposure", "blur_samples", "noise_sigma", "brightness", "lighting", "corner_jitter_px",
+                  "drop_probability", "seed")
+# a simulated camera is not ideal by default: the authors' measured pose noise at rest
+PARAMS = TAG_PARAMS + CAMERA_PARAMS + params_from_dataclass(
+    RenderSettings, names=_RENDER_PARAMS, defaults=RenderSettings(corner_jitter_px=AUTHORS_CORNER_JITTER_PX)) + [
     Param("board_file", "", "calibration board drawn in the tank (YAML); empty = the default board"),
     Param("fps", 30.0, "frame rate in node-clock time [Hz]", min=1.0, max=240.0),
     Param("frame_id", "camera", "frame of the images"),
-    Param("exposure", 0.010, "exposure time (motion blur) [s]", min=0.0, max=0.2),
-    Param("blur_samples", 5, "poses averaged over the exposure", min=1, max=32),
-    Param("noise_sigma", 2.0, "sensor noise [grey levels]", min=0.0, max=50.0),
-    Param("brightness", 1.0, "global lighting gain", min=0.05, max=2.0),
-    Param("lighting", 0.3, "uneven lighting: gain drop from the hot spot to the darkest corner", min=0.0, max=0.99),
-    Param("corner_jitter_px", AUTHORS_CORNER_JITTER_PX, "per-frame random tag displacement (vibration, "
-          "ripples) [px]; the default gives the authors' measured pose noise, 0 = an ideal camera",
-          min=0.0, max=5.0),
-    Param("drop_probability", 0.0, "chance that a frame is lost (live)", min=0.0, max=0.99, live=True),
     Param("tag_yaw", 0.0, "yaw of the tag on the body [rad], as mounted (the authors' robot's was turned by about "
           "+5 deg: the hardware replay draws it so; a tracker without offset_yaw then reports heading + tag_yaw)",
           min=-math.pi, max=math.pi),
-    Param("seed", 0, "random seed (noise, drops, water texture)", min=0, max=2**31 - 1),
     Param("occlusion_start_s", -1.0, "hide the robot under an occluder from this node-clock time [s]; < 0 = never "
           "(live; on the system clock an epoch time)", min=-1.0, max=1e10, live=True),
     Param("occlusion_duration_s", 1.0, "for this long [s] (live)", min=0.0, max=1e6, live=True),
@@ -80,11 +75,7 @@ class CameraSimNode(Node):
         pose = load_camera_pose(p["tank_calibration_file"])
         try:
             board = Board.from_yaml(p["board_file"] or None)
-            settings = RenderSettings(
-                tag_family=p["tag_family"], tag_id=p["tag_id"], tag_size=p["tag_size"], tag_height=p["tag_height"],
-                exposure=p["exposure"], blur_samples=p["blur_samples"], noise_sigma=p["noise_sigma"],
-                brightness=p["brightness"], lighting=p["lighting"], corner_jitter_px=p["corner_jitter_px"],
-                drop_probability=p["drop_probability"], seed=p["seed"])
+            settings = from_params(RenderSettings, p)
             self.renderer = TankRenderer(camera, pose, settings, board)
         except (OSError, ValueError) as exc:
             raise ConfigurationError(str(exc)) from exc
@@ -122,8 +113,7 @@ class CameraSimNode(Node):
 
     def _on_parameters(self, changed: dict) -> None:
         if "drop_probability" in changed:
-            self.renderer.settings = dataclasses.replace(self.renderer.settings,
-                                                         drop_probability=changed["drop_probability"])
+            self.renderer.settings = self.renderer.settings.replace(drop_probability=changed["drop_probability"])
         for name, what in (("fault_freeze", "repeating the last frame with fresh stamps"),
                            ("fault_stopped", "publishing no frames and no camera_info")):
             if name in changed:

@@ -43,7 +43,8 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
-from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
+from soft_robot_common import (ConfigurationError, MessageGate, Param, declare_parameters, params_from_dataclass,
+                                run_node)
 from soft_robot_interfaces.msg import LimbActivation
 
 from frog_vision.core.detection import DetectorSettings
@@ -55,8 +56,12 @@ from frog_vision.nodes.common import load_camera, load_camera_pose
 from frog_vision.nodes.messages import array_to_image, image_to_array, model_from_camera_info, stamp_to_s
 from frog_vision.nodes.settings import CAMERA_PARAMS, TAG_PARAMS
 from frog_common.se2 import set_yaw
+from frog_common.settings import from_params
 
-_F = FilterSettings()
+# the filter's settings that a user tunes (the gates and initial uncertainties stay the core's)
+_FILTER_PARAMS = ("accel_noise", "yaw_accel_noise", "kick_window", "kick_delay", "kick_accel_noise",
+                  "kick_yaw_accel_noise", "coast_accel_noise", "coast_yaw_accel_noise", "coast_drag_time",
+                  "coast_yaw_drag_time", "coast_timeout", "reset_timeout")
 PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
     Param("world_frame", "tank", "frame of the poses"),
     Param("body_frame", "frog", "robot frame (child frame of the odometry)"),
@@ -73,32 +78,9 @@ PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
     Param("estimator", "filter", "state from the tag poses: 'filter' (Kalman filter with kick inputs) or "
           "'frame_difference' (the paper's tracker: the raw pose, velocities as differences of consecutive frames)",
           choices=ESTIMATORS),
-    Param("accel_noise", _F.accel_noise, "filter: linear acceleration noise density [(m/s^2)^2/Hz]",
-          min=1e-9, max=100.0, live=True),
-    Param("yaw_accel_noise", _F.yaw_accel_noise, "filter: yaw acceleration noise density [(rad/s^2)^2/Hz]",
-          min=1e-9, max=1000.0, live=True),
     Param("kick_topic", "frog/bridge/sent", "limb firings (LimbActivation) fed to the filter as kick inputs; "
           "empty = none"),
-    Param("kick_window", _F.kick_window, "filter with kicks: follow the stroke this long after each firing [s]",
-          min=0.01, max=5.0, live=True),
-    Param("kick_delay", _F.kick_delay, "filter with kicks: from a firing's stamp to the start of its window [s]",
-          min=0.0, max=2.0, live=True),
-    Param("kick_accel_noise", _F.kick_accel_noise, "filter with kicks: linear acceleration noise density in a "
-          "kick window [(m/s^2)^2/Hz]", min=1e-9, max=100.0, live=True),
-    Param("kick_yaw_accel_noise", _F.kick_yaw_accel_noise, "filter with kicks: yaw acceleration noise density "
-          "in a kick window [(rad/s^2)^2/Hz]", min=1e-9, max=1000.0, live=True),
-    Param("coast_accel_noise", _F.coast_accel_noise, "filter with kicks: linear acceleration noise density "
-          "between kicks [(m/s^2)^2/Hz]", min=1e-12, max=100.0, live=True),
-    Param("coast_yaw_accel_noise", _F.coast_yaw_accel_noise, "filter with kicks: yaw acceleration noise density "
-          "between kicks [(rad/s^2)^2/Hz]", min=1e-12, max=1000.0, live=True),
-    Param("coast_drag_time", _F.coast_drag_time, "filter with kicks: decay time of the body velocities between "
-          "kicks [s]; 0 = no drag", min=0.0, max=1000.0, live=True),
-    Param("coast_yaw_drag_time", _F.coast_yaw_drag_time, "filter with kicks: decay time of the yaw rate between "
-          "kicks [s]; 0 = no drag", min=0.0, max=1000.0, live=True),
-    Param("coast_timeout", _F.coast_timeout, "publish predictions this long after the tag is lost [s]",
-          min=0.0, max=10.0),
-    Param("reset_timeout", _F.reset_timeout, "restart the filter after the tag was lost this long [s]",
-          min=0.0, max=60.0),
+] + params_from_dataclass(FilterSettings, names=_FILTER_PARAMS) + [
     Param("publish_debug_image", False, "publish frog/tracker/debug_image (annotated frames)", live=True),
     Param("publish_tf", True, "publish the tracked pose on tf as world_frame -> body_frame"),
     Param("frozen_frames", 3, "this many byte-identical frames in a row (the first included) mean a frozen camera: "
@@ -113,9 +95,6 @@ class TrackerNode(Node):
         super().__init__("tracker_node")
         p = declare_parameters(self, PARAMS, validate=self._validate, on_change=self._apply)
         self.cfg = dict(p)
-        if p["reset_timeout"] < p["coast_timeout"]:
-            raise ConfigurationError(f"reset_timeout {p['reset_timeout']} must be >= coast_timeout "
-                                     f"{p['coast_timeout']}")
         self.fixed_camera = load_camera(p["camera_info_file"])
         self.camera_pose = load_camera_pose(p["tank_calibration_file"])
         if not p["tank_calibration_file"]:
@@ -172,14 +151,7 @@ class TrackerNode(Node):
 
     @staticmethod
     def _filter_settings(p) -> FilterSettings:
-        drag = {k: p[k] if p[k] > 0 else np.inf for k in ("coast_drag_time", "coast_yaw_drag_time")}
-        return FilterSettings(accel_noise=p["accel_noise"], yaw_accel_noise=p["yaw_accel_noise"],
-                              coast_timeout=p["coast_timeout"], reset_timeout=p["reset_timeout"],
-                              kick_window=p["kick_window"], kick_delay=p["kick_delay"],
-                              kick_accel_noise=p["kick_accel_noise"],
-                              kick_yaw_accel_noise=p["kick_yaw_accel_noise"],
-                              coast_accel_noise=p["coast_accel_noise"],
-                              coast_yaw_accel_noise=p["coast_yaw_accel_noise"], **drag)
+        return from_params(FilterSettings, {k: p[k] for k in _FILTER_PARAMS})
 
     def _validate(self, values: dict) -> str | None:
         try:
