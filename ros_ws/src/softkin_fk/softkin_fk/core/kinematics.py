@@ -24,6 +24,7 @@ import dataclasses
 from typing import Callable, Optional
 
 import numpy as np
+from frog_common.settings import Settings, setting
 
 from .forward import FKResult, ForwardSolver
 from .inverse import IKResult, solve_ik
@@ -66,15 +67,19 @@ def check_iterations(i_max: int, default: int) -> int:
     return i_max
 
 
-@dataclasses.dataclass
-class IKSettings:
-    """Inverse-kinematics settings (Algorithm 2)."""
+@dataclasses.dataclass(frozen=True)
+class IKSettings(Settings):
+    """Inverse-kinematics settings (Algorithm 2); kinematics_node's parameters of the names given."""
 
-    lam: float = 0.2e-3           #: error threshold lambda [m]
-    i_max: int = 30               #: iteration limit
-    jacobian: str = 'implicit'    #: 'implicit' (IFT sensitivity, fast) or 'central' (the paper)
-    direction: str = 'gauss-newton'
-    fk_tol: float = 1e-7          #: forward-kinematics tolerance inside IK [m]
+    jacobian: str = setting('implicit', "IK Jacobian: implicit-function sensitivity (fast) or the paper's central "
+                            "differences", choices=('implicit', 'central'))
+    direction: str = setting('gauss-newton', "IK search direction", choices=('gauss-newton', 'gradient'))
+    lam: float = setting(0.2e-3, "IK error threshold lambda (0.2 mm in the paper)", min=LAM_RANGE[0],
+                         max=LAM_RANGE[1], unit="m", live=True, param="tolerance")
+    i_max: int = setting(30, "IK iteration limit i_max", min=1, max=MAX_ITERATIONS, live=True,
+                         param="max_iterations")
+    fk_tol: float = setting(1e-7, "forward-kinematics tolerance", min=1e-10, max=1e-4, unit="m",
+                            param="fk_tolerance")
 
 
 def load_robot(model: str = 'finger', resolution: int = 0, mesh_file: str = '', spec_file: str = '') -> SoftMesh:

@@ -29,13 +29,14 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
+from frog_common.settings import from_params
+from soft_robot_common import (ConfigurationError, MessageGate, Param, declare_parameters, params_from_dataclass,
+                                run_node)
 from soft_robot_interfaces.action import FollowCurve
 from soft_robot_interfaces.srv import ForwardKinematics, SolveIk
 from visualization_msgs.msg import Marker
 
-from ..core.kinematics import (LAM_RANGE, MAX_ITERATIONS, IKSettings, RequestError, RobotKinematics, check_tolerance,
-                               load_robot)
+from ..core.kinematics import IKSettings, RequestError, RobotKinematics, check_tolerance, load_robot
 from ..core.worker import SolverWorker
 
 PARAMS = [
@@ -47,13 +48,7 @@ PARAMS = [
     Param("marker", "tip", "tracked marker (end effector) of the mesh"),
     Param("config_samples", 5, "configuration-space samples per actuator solved at start-up to seed IK "
           "(n^actuators FK solves; 0 = start from rest)", min=0, max=9),
-    Param("jacobian", "implicit", "IK Jacobian: implicit-function sensitivity (fast) or the paper's central "
-          "differences", choices=("implicit", "central")),
-    Param("direction", "gauss-newton", "IK search direction", choices=("gauss-newton", "gradient")),
-    Param("tolerance", 2e-4, "IK error threshold lambda [m] (0.2 mm in the paper)", min=LAM_RANGE[0],
-          max=LAM_RANGE[1], live=True),
-    Param("max_iterations", 30, "IK iteration limit i_max", min=1, max=MAX_ITERATIONS, live=True),
-    Param("fk_tolerance", 1e-7, "forward-kinematics tolerance [m]", min=1e-10, max=1e-4),
+] + params_from_dataclass(IKSettings) + [
     Param("max_target_distance", 0.0, "targets farther than this from the robot's rest bounding box are refused "
           "[m]; 0 = the box diagonal", min=0.0, max=100.0),
     Param("hold_rest_cables", False, "a cable at rest length that bending would stretch goes taut (its motor "
@@ -87,8 +82,7 @@ class KinematicsNode(Node):
                      f"{len(mesh.actuators)} configuration samples (first solves compile numba kernels)")
             self.kin = RobotKinematics(
                 mesh, marker=p["marker"], config_samples=p["config_samples"],
-                settings=IKSettings(lam=p["tolerance"], i_max=p["max_iterations"], jacobian=p["jacobian"],
-                                    direction=p["direction"], fk_tol=p["fk_tolerance"]),
+                settings=from_params(IKSettings, p),
                 max_target_distance=p["max_target_distance"], hold_rest_cables=p["hold_rest_cables"])
         except RequestError as exc:
             raise ConfigurationError(str(exc)) from None
@@ -132,9 +126,7 @@ class KinematicsNode(Node):
         self.pub_diag.publish(arr)
 
     def _on_change(self, changed: dict) -> None:
-        s = self.kin.settings
-        s.lam = self.p["tolerance"]
-        s.i_max = self.p["max_iterations"]
+        self.kin.settings = from_params(IKSettings, self.p)
 
     # --- publishing -----------------------------------------------------------------------
     def _publish_command(self, ik, stamp=None, final: bool = True) -> None:
