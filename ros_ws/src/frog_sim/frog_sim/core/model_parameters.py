@@ -34,7 +34,9 @@ coefficient of a flat strip, calibrated on N = 1..4 period replays of the hardwa
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, fields
+
+from frog_common.settings import Settings, check, setting
 
 import numpy as np
 
@@ -48,7 +50,7 @@ SILICONE_DENSITY = 1080.0
 
 
 @dataclass(frozen=True)
-class FrogParameters:
+class FrogParameters(Settings):
     """Physical and numerical parameters of the frog robot model (SI units).
 
     Attributes are documented in ``PARAMETER_SOURCES``; use :meth:`replace` to
@@ -57,124 +59,185 @@ class FrogParameters:
 
     # --- geometry (paper Fig. 2b; see module docstring) ---
     # L_o [m]
-    body_side_length: float = field(default=0.090, metadata={'range': (0.03, 0.3), 'unit': 'm'})
+    body_side_length: float = setting(0.090,
+                                      'paper Fig. 2b L_o = 90 mm, read as body square side (gives N = 128)',
+                                      min=0.03, max=0.3, unit='m')
     # L_i [m]
-    limb_length: float = field(default=0.035, metadata={'range': (0.01, 0.1), 'unit': 'm'})
+    limb_length: float = setting(0.035,
+                                 'paper Fig. 2b L_i = 35 mm, read as limb length (gives N = 128)',
+                                 min=0.01, max=0.1, unit='m')
     # H_f [m]: height of the front side (body_fluid_section='height')
-    front_dimension_hf: float = field(default=0.035, metadata={'range': (0.005, 0.1), 'unit': 'm'})
+    front_dimension_hf: float = setting(0.035,
+                                        'paper Fig. 2b H_f = 35 mm: height of the front side (body drag, added mass)',
+                                        min=0.005, max=0.1, unit='m')
     # H_a [m]: height of the rear side
-    aft_dimension_ha: float = field(default=0.024, metadata={'range': (0.005, 0.1), 'unit': 'm'})
+    aft_dimension_ha: float = setting(0.024,
+                                      'paper Fig. 2b H_a = 24 mm: height of the rear side (body drag, added mass)',
+                                      min=0.005, max=0.1, unit='m')
     # dl = L_o / 23 = 3.91 mm -> 128 nodes
-    body_edges_per_side: int = field(default=23, metadata={'range': (2, 400), 'unit': '-'})
+    body_edges_per_side: int = setting(23,
+                                       'dl = 90/23 = 3.91 mm ~ paper "dl ~ 4 mm, N = 128"',
+                                       min=2, max=400, unit='-')
     # --- limbs ---
     # authors' code: rod radius ~2 mm
-    limb_radius: float = field(default=0.002, metadata={'range': (0.0005, 0.01), 'unit': 'm'})
+    limb_radius: float = setting(0.002,
+                                 "authors' related code: limb rod radius ~2 mm (D = 4 mm in eq. 1, 3)",
+                                 min=0.0005, max=0.01, unit='m')
     # E_0 [Pa] (paper)
-    limb_young_relaxed: float = field(default=3.0e6, metadata={'range': (1.0e5, 1.0e8), 'unit': 'Pa'})
+    limb_young_relaxed: float = setting(3.0e6,
+                                        'paper: E_0 = 3.0 MPa',
+                                        min=100000.0, max=100000000.0, unit='Pa')
     # E_max [Pa] (paper; x2.68 while SMA is heated)
-    limb_young_heated: float = field(default=8.04e6, metadata={'range': (1.0e5, 1.0e8), 'unit': 'Pa'})
+    limb_young_heated: float = setting(8.04e6,
+                                       'paper: E_max = 8.04 MPa while the SMA is heated (actuation phase)',
+                                       min=100000.0, max=100000000.0, unit='Pa')
     # EGaIn volume % of the interface layer
-    egain_vol_pct: float = field(default=10.0, metadata={'range': (0.0, 100.0), 'unit': '%'})
+    egain_vol_pct: float = setting(10.0,
+                                   'design variable, 0-50 % (paper); 10 % for the calibration runs',
+                                   min=0.0, max=100.0, unit='%')
     # share of limb volume that is the LMEE layer
-    interface_layer_fraction: float = field(default=1.0 / 3.0, metadata={'range': (0.01, 1.0), 'unit': '-'})
-    silicone_density: float = field(default=SILICONE_DENSITY, metadata={'range': (900.0, 1300.0), 'unit': 'kg/m^3'})
-    egain_density: float = field(default=EGAIN_DENSITY, metadata={'range': (6000.0, 6500.0), 'unit': 'kg/m^3'})
+    interface_layer_fraction: float = setting(1.0 / 3.0,
+                                              'assumption: limb = 3 equal layers (stretched, LMEE, unstretched '
+                                              'silicone), paper Fig. 3a schematic',
+                                              min=0.01, max=1.0, unit='-')
+    silicone_density: float = setting(SILICONE_DENSITY,
+                                      'Smooth-On silicone data sheets 1.07-1.08 g/cm^3',
+                                      min=900.0, max=1300.0, unit='kg/m^3')
+    egain_density: float = setting(EGAIN_DENSITY,
+                                   'EGaIn 6.25 g/cm^3 (Dickey et al. 2008)',
+                                   min=6000.0, max=6500.0, unit='kg/m^3')
     # --- body ---
     # [kg] four 3S 300 mAh LiPo (~28 g each) + PCB + foam + silicone
-    body_mass: float = field(default=0.150, metadata={'range': (0.02, 1.0), 'unit': 'kg'})
+    body_mass: float = setting(0.150,
+                               'estimate: four 3S 300 mAh LiPo (~28 g each, paper "Robot Electronics") + PCB, foam, '
+                               'silicone',
+                               min=0.02, max=1.0, unit='kg')
     # [m] z-extent: neutrally buoyant 150 g over (90^2-35^2) mm^2
-    body_height: float = field(default=0.022, metadata={'range': (0.005, 0.1), 'unit': 'm'})
+    body_height: float = setting(0.022,
+                                 'neutral buoyancy (paper: foam cancels battery weight): 150 g / 1000 kg/m^3 over '
+                                 'the frame area 90^2 - 35^2 mm^2 = 22 mm (body EI, EA)',
+                                 min=0.005, max=0.1, unit='m')
     # [Pa] effective; "four elastic rods with high stiffness"
-    body_young_equivalent: float = field(default=26.0e6, metadata={'range': (1.0e6, 1.0e11), 'unit': 'Pa'})
+    body_young_equivalent: float = setting(26.0e6,
+                                           'assumption: "four elastic rods with high stiffness"; gives body EI ~ '
+                                           '2.6e4 x limb EI so the body stays square',
+                                           min=1000000.0, max=100000000000.0, unit='Pa')
     # [m] in-plane frame width (90 - 35) / 2 mm
-    body_section_width: float = field(default=0.0275, metadata={'range': (0.002, 0.1), 'unit': 'm'})
+    body_section_width: float = setting(0.0275,
+                                        'frame width (L_o - L_i)/2 = 27.5 mm',
+                                        min=0.002, max=0.1, unit='m')
     # [m] D of the body rods in eq. 1, 3 with body_fluid_section='rod' (the earlier model)
-    body_rod_diameter: float = field(default=0.004, metadata={'range': (0.001, 0.1), 'unit': 'm'})
+    body_rod_diameter: float = setting(0.004,
+                                       'D of the body rods in drag eq. 1 and added mass eq. 3 with '
+                                       "body_fluid_section='rod' only (the earlier model: the limbs' 4 mm, with "
+                                       "which the authors' C_bn = 0.8 was calibrated); the default 'height' section "
+                                       'uses H_f/H_a',
+                                       min=0.001, max=0.1, unit='m')
     # --- fluid (paper, Hydrodynamic Characterization) ---
     # rho_f
-    fluid_density: float = field(default=WATER_DENSITY, metadata={'range': (900.0, 1100.0), 'unit': 'kg/m^3'})
+    fluid_density: float = setting(WATER_DENSITY,
+                                   'paper: rho_f = 1000',
+                                   min=900.0, max=1100.0, unit='kg/m^3')
     # C_ln (a flat strip normal to the flow; issue 18 calibration; paper 1 for a rod)
-    limb_drag_normal: float = field(default=2.075, metadata={'range': (0.0, 5.0), 'unit': '-'})
+    limb_drag_normal: float = setting(2.075,
+                                      'joint calibration on N-period replays (issue 18): 2.075; the limbs are flat '
+                                      'strips (limb_fluid_width) and a flat plate normal to the flow has C_d ~ 2.0 '
+                                      '(Hoerner, Fluid-Dynamic Drag, 1965, ch. 3: 1.98 for a 2D plate; 1.17 for a '
+                                      'square one); paper: C_ln = 1 for a rod',
+                                      min=0.0, max=5.0, unit='-')
     # C_lt
-    limb_drag_tangent: float = field(default=0.01, metadata={'range': (0.0, 1.0), 'unit': '-'})
+    limb_drag_tangent: float = setting(0.01,
+                                       'paper: C_lt = 0.01',
+                                       min=0.0, max=1.0, unit='-')
     # C_bn (jointly calibrated with the body's height section, issue 11; paper 0.8 with a 4 mm rod)
-    body_drag_normal: float = field(default=0.71, metadata={'range': (0.0, 5.0), 'unit': '-'})
+    body_drag_normal: float = setting(0.71,
+                                      'joint calibration (frog-sweep calibrate, issue 11): 0.71 with the body height'
+                                      ' section (paper: 0.8 with a 4 mm rod, calibrated on the 10 % runs only)',
+                                      min=0.0, max=5.0, unit='-')
     # C_bt
-    body_drag_tangent: float = field(default=0.008, metadata={'range': (0.0, 1.0), 'unit': '-'})
+    body_drag_tangent: float = setting(0.008,
+                                       'paper: C_bt = 0.008 = C_bn / 100',
+                                       min=0.0, max=1.0, unit='-')
     # C_a (theoretical value)
-    added_mass_coefficient: float = field(default=1.0, metadata={'range': (0.0, 3.0), 'unit': '-'})
+    added_mass_coefficient: float = setting(1.0,
+                                            'paper: C_a = 1 (theoretical)',
+                                            min=0.0, max=3.0, unit='-')
     # --- actuation ---
     # hardware pulse [s] (DESIGN.md; paper 70 ms)
-    pulse_duration: float = field(default=0.080, metadata={'range': (0.01, 0.5), 'unit': 's'})
+    pulse_duration: float = setting(0.080,
+                                    'DESIGN.md hardware pulse 80 ms (paper characterisation 70 ms)',
+                                    min=0.01, max=0.5, unit='s')
     # one primitive per 1.5 s (DESIGN.md)
-    primitive_period: float = field(default=1.5, metadata={'range': (0.2, 10.0), 'unit': 's'})
+    primitive_period: float = setting(1.5,
+                                      'DESIGN.md: one primitive per 1.5 s',
+                                      min=0.2, max=10.0, unit='s')
     # sense of the relaxed curl (see frog_model)
-    limb_curl_direction: str = field(default='forward', metadata={'choices': ('forward', 'backward'), 'unit': '-'})
+    limb_curl_direction: str = setting('forward',
+                                       "'forward' = the relaxed curl turns a lateral limb toward the front, i.e. an "
+                                       "aft-pointing limb away from the body axis; 'backward' the other way. Not "
+                                       "shown by the paper; joint calibration (issue 11): 'forward' (per-period "
+                                       "heading changes within 25 % of the robot's), 'backward' (the earlier choice,"
+                                       ' from forward speed only) turns about half as much',
+                                       choices=('forward', 'backward'), unit='-')
     # limb root direction: 0 lateral, -90 aft, +90 forward
-    limb_root_angle_deg: float = field(default=-90.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
+    limb_root_angle_deg: float = setting(-90.0,
+                                         'joint calibration (Fig. 2b gives no angle; issue 11): root direction of '
+                                         'the rear limbs, turned from lateral (0) toward the rear: -90 = straight '
+                                         'aft (the range bound). Was -75 from forward speed alone',
+                                         min=-90.0, max=90.0, unit='deg')
     # --- fluid sections (issue 11) ---
     # 'rod': body drag/added mass with body_rod_diameter (the legacy 4 mm rod); 'height': the
     # body's own height, H_f at the front side to H_a at the rear side (Fig. 2b)
-    body_fluid_section: str = field(default='height', metadata={'choices': ('rod', 'height'), 'unit': '-'})
+    body_fluid_section: str = setting('height',
+                                      "'height': the body's sides are H_f (front) to H_a (rear) tall (Fig. 2b), so "
+                                      "eq. 1 and 3 use that height as D; 'rod': the 4 mm body_rod_diameter",
+                                      choices=('rod', 'height'), unit='-')
     # projected width of a limb strip normal to the swimming plane (drag eq. 1, added mass eq. 3)
-    limb_fluid_width: float = field(default=0.030, metadata={'range': (0.002, 0.03), 'unit': 'm'})
+    limb_fluid_width: float = setting(0.030,
+                                      'joint calibration (issue 11): projected width of the flat limb strip normal '
+                                      'to the plane (Fig. 3a): 30 mm, the upper bound (~ the body height); not given'
+                                      ' by the paper (legacy: 4 mm = 2 r)',
+                                      min=0.002, max=0.03, unit='m')
     # eq. 4 lumping of added mass: 'normal' (paper: full normal value at every node) or
     # 'direction_average' (half of it: a slender section has added mass only normal to itself)
-    added_mass_lumping: str = field(default='direction_average', metadata={'choices': ('normal', 'direction_average'),
-                                                              'unit': '-'})
+    added_mass_lumping: str = setting('direction_average',
+                                      "eq. 4 lumps added mass isotropically; 'direction_average' uses half the "
+                                      'normal value (a slender section has added mass only normal to itself: exact '
+                                      "for a translating square ring); 'normal' = paper",
+                                      choices=('normal', 'direction_average'), unit='-')
     # front limbs' root direction relative to the rear limbs' (0: all four alike)
-    front_root_angle_offset_deg: float = field(default=32.0, metadata={'range': (-90.0, 90.0), 'unit': 'deg'})
+    front_root_angle_offset_deg: float = setting(32.0,
+                                                 'joint calibration (issue 11): front limbs turned by this much '
+                                                 'toward the front relative to limb_root_angle_deg: 32 -> front '
+                                                 'limbs 58 deg aft of lateral (Fig. 2b gives no angle for either '
+                                                 'pair)',
+                                                 min=-90.0, max=90.0, unit='deg')
     # --- linear damping lumped on the rigid body (issue 18; core/body_damping.py) ---
     # X_u: surge
-    surge_damping_linear: float = field(default=0.0483, metadata={'range': (0.0, 1.0), 'unit': 'N s/m'})
+    surge_damping_linear: float = setting(0.0483,
+                                          'X_u of the linear damping lumped on the rigid body (Fossen D_L; radiation'
+                                          ' damping, meniscus, limb recovery strokes; core/body_damping.py): 0.0483,'
+                                          ' joint calibration on N-period replays and all speeds (issue 18, '
+                                          'frog_sim/data/replay_calibration.json)',
+                                          min=0.0, max=1.0, unit='N s/m')
     # Y_v: sway
-    sway_damping_linear: float = field(default=0.0, metadata={'range': (0.0, 1.0), 'unit': 'N s/m'})
+    sway_damping_linear: float = setting(0.0,
+                                         'Y_v of the same linear damping (sideways): 0, not calibrated (the side-'
+                                         'slip targets are met without it; any Y_v > 0 lowers them)',
+                                         min=0.0, max=1.0, unit='N s/m')
     # N_r: yaw
-    yaw_damping_linear: float = field(default=0.000375, metadata={'range': (0.0, 0.05), 'unit': 'N m s/rad'})
-
-    def replace(self, **changes) -> 'FrogParameters':
-        """Return a copy with some fields changed (validated)."""
-        new = replace(self, **changes)
-        new.validate()
-        return new
+    yaw_damping_linear: float = setting(0.000375,
+                                        'N_r of the same linear damping (yaw), what stops the turn after a kick: '
+                                        '3.75e-4, joint calibration on N-period replays (issue 18): a decay rate N_r'
+                                        " / I = 0.37 1/s (I = 1.0e-3 kg m^2 with the added mass), beside the limbs' "
+                                        'quadratic drag',
+                                        min=0.0, max=0.05, unit='N m s/rad')
 
     def validate(self) -> None:
-        """Raise ``ValueError`` naming the first non-physical value (incl. outside its range)."""
-        for f in fields(self):
-            lo_hi = f.metadata.get('range')
-            value = getattr(self, f.name)
-            if lo_hi is not None and not lo_hi[0] <= value <= lo_hi[1]:
-                raise ValueError(f'{f.name} = {value!r} {f.metadata["unit"]} is outside its plausible range '
-                                 f'{lo_hi[0]:g} - {lo_hi[1]:g} {f.metadata["unit"]}')
-        positive = ['body_side_length', 'limb_length', 'limb_radius', 'limb_young_relaxed',
-                    'body_rod_diameter',
-                    'limb_young_heated', 'body_mass', 'body_height', 'body_young_equivalent',
-                    'body_section_width', 'fluid_density', 'pulse_duration', 'primitive_period',
-                    'silicone_density', 'egain_density']
-        for name in positive:
-            value = getattr(self, name)
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f'{name} = {value!r} must be a finite positive number')
-        for name in ['limb_drag_normal', 'limb_drag_tangent', 'body_drag_normal',
-                     'body_drag_tangent', 'added_mass_coefficient', 'surge_damping_linear',
-                     'sway_damping_linear', 'yaw_damping_linear']:
-            value = getattr(self, name)
-            if not np.isfinite(value) or value < 0:
-                raise ValueError(f'{name} = {value!r} must be finite and >= 0')
-        if not 0 <= self.egain_vol_pct <= 100:
-            raise ValueError(f'egain_vol_pct = {self.egain_vol_pct!r} must be in 0-100 %')
-        if not 0 < self.interface_layer_fraction <= 1:
-            raise ValueError(f'interface_layer_fraction = {self.interface_layer_fraction!r} '
-                             'must be in (0, 1]')
-        if int(self.body_edges_per_side) < 2:
-            raise ValueError(f'body_edges_per_side = {self.body_edges_per_side!r} must be >= 2')
-        for f in fields(self):
-            choices = f.metadata.get('choices')
-            if choices is not None and getattr(self, f.name) not in choices:
-                raise ValueError(f'{f.name} = {getattr(self, f.name)!r}, expected one of {choices}')
-        if self.limb_curl_direction not in ('forward', 'backward'):
-            raise ValueError(f"limb_curl_direction = {self.limb_curl_direction!r}, "
-                             "expected 'forward' or 'backward'")
+        """Raise ``ValueError`` naming the first value outside its range or choices."""
+        reason = check(self)
+        if reason:
+            raise ValueError(reason)
 
     # ---- derived quantities -------------------------------------------------
     @property
@@ -218,76 +281,10 @@ class FrogParameters:
         """Body EA [N]."""
         return self.body_young_equivalent * self.body_height * self.body_section_width
 
-    def as_dict(self) -> dict:
-        """Plain dict of all fields (for metadata)."""
-        return asdict(self)
-
 
 #: Human-readable provenance of every field of :class:`FrogParameters` (name -> (unit, source)).
-PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
-    'body_side_length': ('m', 'paper Fig. 2b L_o = 90 mm, read as body square side (gives N = 128)'),
-    'limb_length': ('m', 'paper Fig. 2b L_i = 35 mm, read as limb length (gives N = 128)'),
-    'front_dimension_hf': ('m', 'paper Fig. 2b H_f = 35 mm: height of the front side (body drag, added mass)'),
-    'aft_dimension_ha': ('m', 'paper Fig. 2b H_a = 24 mm: height of the rear side (body drag, added mass)'),
-    'body_edges_per_side': ('-', 'dl = 90/23 = 3.91 mm ~ paper "dl ~ 4 mm, N = 128"'),
-    'limb_radius': ('m', "authors' related code: limb rod radius ~2 mm (D = 4 mm in eq. 1, 3)"),
-    'limb_young_relaxed': ('Pa', 'paper: E_0 = 3.0 MPa'),
-    'limb_young_heated': ('Pa', 'paper: E_max = 8.04 MPa while the SMA is heated (actuation phase)'),
-    'egain_vol_pct': ('%', 'design variable, 0-50 % (paper); 10 % for the calibration runs'),
-    'interface_layer_fraction': ('-', 'assumption: limb = 3 equal layers (stretched, LMEE, '
-                                 'unstretched silicone), paper Fig. 3a schematic'),
-    'silicone_density': ('kg/m^3', 'Smooth-On silicone data sheets 1.07-1.08 g/cm^3'),
-    'egain_density': ('kg/m^3', 'EGaIn 6.25 g/cm^3 (Dickey et al. 2008)'),
-    'body_mass': ('kg', 'estimate: four 3S 300 mAh LiPo (~28 g each, paper "Robot Electronics") '
-                  '+ PCB, foam, silicone'),
-    'body_height': ('m', 'neutral buoyancy (paper: foam cancels battery weight): 150 g / '
-                    '1000 kg/m^3 over the frame area 90^2 - 35^2 mm^2 = 22 mm (body EI, EA)'),
-    'body_rod_diameter': ('m', "D of the body rods in drag eq. 1 and added mass eq. 3 with body_fluid_section="
-                          "'rod' only (the earlier model: the limbs' 4 mm, with which the authors' C_bn = 0.8 "
-                          "was calibrated); the default 'height' section uses H_f/H_a"),
-    'body_young_equivalent': ('Pa', 'assumption: "four elastic rods with high stiffness"; gives '
-                              'body EI ~ 2.6e4 x limb EI so the body stays square'),
-    'body_section_width': ('m', 'frame width (L_o - L_i)/2 = 27.5 mm'),
-    'fluid_density': ('kg/m^3', 'paper: rho_f = 1000'),
-    'limb_drag_normal': ('-', 'joint calibration on N-period replays (issue 18): 2.075; the limbs are flat strips '
-                         '(limb_fluid_width) and a flat plate normal to the flow has C_d ~ 2.0 (Hoerner, Fluid-Dynamic '
-                         'Drag, 1965, ch. 3: 1.98 for a 2D plate; 1.17 for a square one); paper: C_ln = 1 for a rod'),
-    'limb_drag_tangent': ('-', 'paper: C_lt = 0.01'),
-    'body_drag_normal': ('-', 'joint calibration (frog-sweep calibrate, issue 11): 0.71 with the body height '
-                         'section (paper: 0.8 with a 4 mm rod, calibrated on the 10 % runs only)'),
-    'body_drag_tangent': ('-', 'paper: C_bt = 0.008 = C_bn / 100'),
-    'added_mass_coefficient': ('-', 'paper: C_a = 1 (theoretical)'),
-    'limb_root_angle_deg': ('deg', 'joint calibration (Fig. 2b gives no angle; issue 11): root direction of the '
-                            'rear limbs, turned from lateral (0) toward the rear: -90 = straight aft (the '
-                            'range bound). Was -75 from forward speed alone'),
-    'body_fluid_section': ('-', "'height': the body's sides are H_f (front) to H_a (rear) tall (Fig. 2b), so "
-                           "eq. 1 and 3 use that height as D; 'rod': the 4 mm body_rod_diameter"),
-    'limb_fluid_width': ('m', 'joint calibration (issue 11): projected width of the flat limb strip normal to the '
-                         'plane (Fig. 3a): 30 mm, the upper bound (~ the body height); not given by the paper '
-                         '(legacy: 4 mm = 2 r)'),
-    'added_mass_lumping': ('-', "eq. 4 lumps added mass isotropically; 'direction_average' uses half the normal "
-                           'value (a slender section has added mass only normal to itself: exact for a '
-                           "translating square ring); 'normal' = paper"),
-    'front_root_angle_offset_deg': ('deg', 'joint calibration (issue 11): front limbs turned by this much toward '
-                                    'the front relative to limb_root_angle_deg: 32 -> front limbs 58 deg aft of '
-                                    'lateral (Fig. 2b gives no angle for either pair)'),
-    'surge_damping_linear': ('N s/m', 'X_u of the linear damping lumped on the rigid body (Fossen D_L; radiation '
-                             'damping, meniscus, limb recovery strokes; core/body_damping.py): 0.0483, joint '
-                             'calibration on N-period replays and all speeds (issue 18, '
-                             'frog_sim/data/replay_calibration.json)'),
-    'sway_damping_linear': ('N s/m', 'Y_v of the same linear damping (sideways): 0, not calibrated (the side-slip '
-                            'targets are met without it; any Y_v > 0 lowers them)'),
-    'yaw_damping_linear': ('N m s/rad', 'N_r of the same linear damping (yaw), what stops the turn after a kick: '
-                           '3.75e-4, joint calibration on N-period replays (issue 18): a decay rate N_r / I = 0.37 '
-                           '1/s (I = 1.0e-3 kg m^2 with the added mass), beside the limbs\' quadratic drag'),
-    'pulse_duration': ('s', 'DESIGN.md hardware pulse 80 ms (paper characterisation 70 ms)'),
-    'primitive_period': ('s', 'DESIGN.md: one primitive per 1.5 s'),
-    'limb_curl_direction': ('-', "'forward' = the relaxed curl turns a lateral limb toward the front, i.e. "
-                            "an aft-pointing limb away from the body axis; 'backward' the other way. Not "
-                            "shown by the paper; joint calibration (issue 11): 'forward' (per-period "
-                            "heading changes within 25 % of the robot's), 'backward' (the earlier choice, "
-                            'from forward speed only) turns about half as much'),
-}
+PARAMETER_SOURCES: dict[str, tuple[str, str]] = {f.name: (f.metadata['unit'], f.metadata['description'])
+                                                 for f in fields(FrogParameters)}
 
 
 def _field(name: str):
@@ -314,7 +311,8 @@ def parameter_range(name: str) -> tuple[float, float] | None:
     >>> parameter_range('body_mass')
     (0.02, 1.0)
     """
-    return _field(name).metadata.get('range')
+    md = _field(name).metadata
+    return None if md['min'] is None else (md['min'], md['max'])
 
 
 def parameter_unit(name: str) -> str:
@@ -332,9 +330,9 @@ def parameter_specs() -> list[dict]:
     for f in fields(FrogParameters):
         spec = {'name': f.name, 'default': getattr(DEFAULT_PARAMETERS, f.name), 'type': f.type,
                 'unit': f.metadata['unit'], 'source': PARAMETER_SOURCES[f.name][1]}
-        if 'range' in f.metadata:
-            spec['range'] = f.metadata['range']
-        if 'choices' in f.metadata:
+        if f.metadata['min'] is not None:
+            spec['range'] = (f.metadata['min'], f.metadata['max'])
+        if f.metadata['choices'] is not None:
             spec['choices'] = f.metadata['choices']
         out.append(spec)
     return out

@@ -16,7 +16,6 @@ faster than real time; otherwise stamps come from the node's ROS clock (system t
 from __future__ import annotations
 
 import copy
-import dataclasses
 import math
 import sys
 import time
@@ -30,11 +29,12 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, run_node
+from soft_robot_common import (ConfigurationError, MessageGate, Param, declare_parameters, params_from_dataclass,
+                                run_node)
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
-from frog_sim.core.model_parameters import PARAMETER_SOURCES, FrogParameters
+from frog_sim.core.model_parameters import FrogParameters
 from frog_common.primitives import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import DEFAULT_TIME_STEP, ConvergenceError, FrogSimulation
 from frog_common.se2 import yaw_quaternion
@@ -83,24 +83,8 @@ _NODE_PARAMS = [
           "[s]; 0 = run forever", min=0.0, max=1e7),
 ]
 
-# Physical settings: every scalar field of FrogParameters becomes parameter "model.<field>",
-# with the range and unit its metadata gives (frog_sim/core/model_parameters.py).
-_MODEL_FIELDS = [f for f in dataclasses.fields(FrogParameters)
-                 if f.type in ("float", "int", "str", float, int, str)]
-
-
-def _model_params(defaults: FrogParameters) -> list:
-    rows = []
-    for f in _MODEL_FIELDS:
-        lo, hi = f.metadata.get("range", (None, None))
-        unit = f.metadata.get("unit", "")
-        choices = f.metadata.get("choices")
-        source = PARAMETER_SOURCES.get(f.name, ("", f"FrogParameters.{f.name}"))[1]
-        rows.append(Param(f.name, getattr(defaults, f.name),
-                          f"{f.name.replace('_', ' ')}{' [' + unit + ']' if unit not in ('', '-') else ''}: "
-                          f"{source}", lo, hi, tuple(choices) if choices else None))
-    return rows
-
+# Physical settings: every field of FrogParameters becomes parameter "model.<field>", with the
+# range, unit and source its setting gives (frog_sim/core/model_parameters.py).
 
 class SimNode(Node):
     """Frog simulator node; parameters in ``_NODE_PARAMS`` and ``model.*``."""
@@ -110,12 +94,11 @@ class SimNode(Node):
     def __init__(self, **kwargs):
         super().__init__("sim_node", **kwargs)
         self.gate = MessageGate(self)     # non-finite, unstamped or oversized commands are refused
-        defaults = FrogParameters()
         p = declare_parameters(self, _NODE_PARAMS, on_change=self.on_parameters)
         self.cfg = p
-        model = declare_parameters(self, _model_params(defaults), prefix="model.")
+        model = declare_parameters(self, params_from_dataclass(FrogParameters), prefix="model.")
         try:
-            params = defaults.replace(**model)
+            params = FrogParameters(**model)
             self.sim = FrogSimulation(params, time_step=p["time_step"])
             self.sim.set_pose(p["initial_x"], p["initial_y"], p["initial_heading"])
             if p["limb_strength_sd"] > 0:

@@ -11,6 +11,7 @@ import dataclasses
 
 import numpy as np
 
+from frog_common.settings import Settings, setting
 from frog_vision.core.tag_images import FAMILIES
 
 #: Tag-frame corner directions of ``Detection.corners`` (bottom-left, bottom-right,
@@ -42,7 +43,7 @@ class Detection:
 
 
 @dataclasses.dataclass(frozen=True)
-class DetectorSettings:
+class DetectorSettings(Settings):
     """Settings of :class:`TagDetector` (pupil-apriltags names in parentheses).
 
     Attributes
@@ -66,25 +67,18 @@ class DetectorSettings:
         Reject detections with more corrected bits than this.
     """
 
-    family: str = "tagStandard41h12"
-    tag_ids: tuple = (47,)
-    decimate: float = 2.0
-    threads: int = 1
-    refine_edges: bool = True
-    sigma: float = 0.0
-    sharpening: float = 0.25
-    max_hamming: int = 1
+    family: str = setting("tagStandard41h12", "tag family", choices=FAMILIES)
+    tag_ids: tuple = setting((47,), "ids to report; empty = all ids of the family")
+    decimate: float = setting(2.0, "quad detection decimation (pupil-apriltags quad_decimate)", min=1.0, max=8.0)
+    threads: int = setting(1, "detector threads", min=1, max=16)
+    refine_edges: bool = setting(True, "refine the quad edges on the full image")
+    sigma: float = setting(0.0, "Gaussian blur before quad detection", min=0.0, max=10.0, unit="px")
+    sharpening: float = setting(0.25, "decode sharpening", min=0.0, max=10.0)
+    max_hamming: int = setting(1, "reject detections with more corrected bits than this", min=0, max=3)
 
     def __post_init__(self):
-        if self.family not in FAMILIES:
-            raise ValueError(f"tag family {self.family!r} is not one of {', '.join(FAMILIES)}")
-        if not 1.0 <= self.decimate <= 8.0:
-            raise ValueError(f"decimate = {self.decimate!r} must be in [1, 8]")
-        if not 1 <= int(self.threads) <= 64:
-            raise ValueError(f"threads = {self.threads!r} must be in 1-64")
-        if self.sigma < 0:
-            raise ValueError(f"sigma = {self.sigma!r} must be >= 0")
         object.__setattr__(self, "tag_ids", tuple(int(i) for i in self.tag_ids))
+        super().__post_init__()
 
 
 class TagDetector:

@@ -18,10 +18,21 @@ from frog_vision.core.detection import TAG_CORNERS_UNIT, Detection
 from frog_vision.core.robot_shape import COM_AHEAD_OF_RING_CENTRE
 from frog_vision.core.tank_calibration import CameraPose
 from frog_common.se2 import wrap_angle
+from frog_common.settings import Settings, setting
+
+
+def tag_size_setting():
+    """The tag's edge: one definition for the pose estimator and the renderer."""
+    return setting(0.047, "edge of the tag's detected square", min=0.005, max=1.0, unit="m")
+
+
+def tag_height_setting():
+    """The tag face's height over the board: one definition for the pose estimator and the renderer."""
+    return setting(0.0, "height of the tag face above the board plane z = 0", min=-0.5, max=0.5, unit="m")
 
 
 @dataclasses.dataclass(frozen=True)
-class PoseSettings:
+class PoseSettings(Settings):
     """Settings of :class:`TagPoseEstimator`.
 
     Attributes
@@ -43,20 +54,17 @@ class PoseSettings:
         (a wrong quad, a tag partly hidden or tilted out of the plane).
     """
 
-    tag_size: float = 0.047
-    tag_height: float = 0.0
-    offset_x: float = COM_AHEAD_OF_RING_CENTRE
-    offset_y: float = 0.0
-    offset_yaw: float = 0.0
-    corner_sigma_px: float = 0.2
-    border_margin_px: float = 3.0
-    max_size_error: float = 0.08
-
-    def __post_init__(self):
-        if not (np.isfinite(self.tag_size) and self.tag_size > 0):
-            raise ValueError(f"tag_size = {self.tag_size!r} must be > 0")
-        if self.corner_sigma_px <= 0:
-            raise ValueError(f"corner_sigma_px = {self.corner_sigma_px!r} must be > 0")
+    tag_size: float = tag_size_setting()
+    tag_height: float = tag_height_setting()
+    offset_x: float = setting(COM_AHEAD_OF_RING_CENTRE, "body frame origin (centre of mass) in the tag frame, x",
+                              min=-0.5, max=0.5, unit="m")
+    offset_y: float = setting(0.0, "body frame origin in the tag frame, y", min=-0.5, max=0.5, unit="m")
+    offset_yaw: float = setting(0.0, "body frame yaw in the tag frame", min=-3.1416, max=3.1416, unit="rad")
+    corner_sigma_px: float = setting(0.2, "corner noise for the pose covariance", min=0.01, max=10.0, unit="px")
+    border_margin_px: float = setting(3.0, "reject tags with a corner closer than this to the image border",
+                                      min=0.0, max=1000.0, unit="px")
+    max_size_error: float = setting(0.08, "reject tags whose fitted edge differs from tag_size by more than this "
+                                    "fraction", min=0.0, max=10.0)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from frog_vision.core.camera_model import CameraModel
+from frog_vision.core.pose import tag_height_setting, tag_size_setting
 from frog_vision.core.robot_shape import BODY_FRAME_WIDTH, BODY_SIDE, LIMB_WIDTH, RobotShape, frog_outline
 from frog_vision.core.tag_images import FAMILIES, tag_border_cells, tag_image
 from frog_vision.core.tank_calibration import Board, CameraPose
@@ -63,9 +64,8 @@ class RenderSettings(Settings):
 
     tag_family: str = setting("tagStandard41h12", "AprilTag family of the robot's tag", choices=FAMILIES)
     tag_id: int = setting(47, "id of the robot's tag (other ids are ignored)", min=0, max=100000)
-    tag_size: float = setting(0.047, "edge of the tag's detected square", min=0.005, max=1.0, unit="m")
-    tag_height: float = setting(0.0, "height of the tag face above the board plane z = 0", min=-0.5, max=0.5,
-                                unit="m")
+    tag_size: float = tag_size_setting()
+    tag_height: float = tag_height_setting()
     exposure: float = setting(0.010, "exposure time (motion blur)", min=0.0, max=0.2, unit="s")
     blur_samples: int = setting(5, "poses averaged over the exposure", min=1, max=32)
     noise_sigma: float = setting(2.0, "sensor noise", min=0.0, max=50.0, unit="grey levels")

@@ -65,16 +65,10 @@ _FILTER_PARAMS = ("accel_noise", "yaw_accel_noise", "kick_window", "kick_delay",
 PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
     Param("world_frame", "tank", "frame of the poses"),
     Param("body_frame", "frog", "robot frame (child frame of the odometry)"),
-    Param("offset_x", PoseSettings().offset_x, "body frame origin (centre of mass) in the tag frame, x [m]",
-          min=-0.5, max=0.5),
-    Param("offset_y", 0.0, "body frame origin in the tag frame, y [m]", min=-0.5, max=0.5),
-    Param("offset_yaw", 0.0, "body frame yaw in the tag frame [rad]", min=-3.1416, max=3.1416),
-    Param("decimate", DetectorSettings().decimate, "quad detection decimation (pupil-apriltags quad_decimate)",
-          min=1.0, max=8.0),
-    Param("threads", 1, "detector threads", min=1, max=16),
-    Param("refine_edges", True, "refine the quad edges on the full image"),
+] + params_from_dataclass(PoseSettings, names=("offset_x", "offset_y", "offset_yaw")) + params_from_dataclass(
+    DetectorSettings, names=("decimate", "threads", "refine_edges")) + [
     Param("search_window", 3.0, "search around the predicted tag, in tag sizes; 0 = whole image", min=0.0, max=50.0),
-    Param("corner_sigma_px", 0.2, "corner noise for the pose covariance [px]", min=0.01, max=10.0),
+] + params_from_dataclass(PoseSettings, names=("corner_sigma_px",)) + [
     Param("estimator", "filter", "state from the tag poses: 'filter' (Kalman filter with kick inputs) or "
           "'frame_difference' (the paper's tracker: the raw pose, velocities as differences of consecutive frames)",
           choices=ESTIMATORS),
@@ -100,11 +94,8 @@ class TrackerNode(Node):
         if not p["tank_calibration_file"]:
             self.get_logger().warn("no tank_calibration_file: assuming the default camera pose 0.8 m over the tank")
         try:
-            self.detector = DetectorSettings(family=p["tag_family"], tag_ids=(p["tag_id"],), decimate=p["decimate"],
-                                             threads=p["threads"], refine_edges=p["refine_edges"])
-            self.pose_settings = PoseSettings(tag_size=p["tag_size"], tag_height=p["tag_height"],
-                                              offset_x=p["offset_x"], offset_y=p["offset_y"],
-                                              offset_yaw=p["offset_yaw"], corner_sigma_px=p["corner_sigma_px"])
+            self.detector = from_params(DetectorSettings, p, family=p["tag_family"], tag_ids=(p["tag_id"],))
+            self.pose_settings = from_params(PoseSettings, p)
             self.filter_settings = self._filter_settings(p)
         except ValueError as exc:
             raise ConfigurationError(str(exc)) from exc
