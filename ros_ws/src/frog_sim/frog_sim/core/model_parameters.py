@@ -85,11 +85,11 @@ class FrogParameters(Settings):
                                  min=0.0005, max=0.01, unit='m')
     # E_0 [Pa] (paper)
     limb_young_relaxed: float = setting(3.0e6,
-                                        'paper: E_0 = 3.0 MPa',
+                                        "limb Young's modulus while the SMA is cold (relaxed); paper: E_0 = 3.0 MPa",
                                         min=100000.0, max=100000000.0, unit='Pa')
     # E_max [Pa] (paper; x2.68 while SMA is heated)
     limb_young_heated: float = setting(8.04e6,
-                                       'paper: E_max = 8.04 MPa while the SMA is heated (actuation phase)',
+                                       "limb Young's modulus while the SMA is heated (actuation phase); paper: E_max = 8.04 MPa",
                                        min=100000.0, max=100000000.0, unit='Pa')
     # EGaIn volume % of the interface layer
     egain_vol_pct: float = setting(10.0,
@@ -136,7 +136,7 @@ class FrogParameters(Settings):
     # --- fluid (paper, Hydrodynamic Characterization) ---
     # rho_f
     fluid_density: float = setting(WATER_DENSITY,
-                                   'paper: rho_f = 1000',
+                                   'density of the water (drag eq. 1, added mass eq. 3); paper: rho_f = 1000',
                                    min=900.0, max=1100.0, unit='kg/m^3')
     # C_ln (a flat strip normal to the flow; issue 18 calibration; paper 1 for a rod)
     limb_drag_normal: float = setting(2.075,
@@ -147,7 +147,7 @@ class FrogParameters(Settings):
                                       min=0.0, max=5.0, unit='-')
     # C_lt
     limb_drag_tangent: float = setting(0.01,
-                                       'paper: C_lt = 0.01',
+                                       "tangential drag coefficient of the limbs (eq. 1); paper: C_lt = 0.01",
                                        min=0.0, max=1.0, unit='-')
     # C_bn (jointly calibrated with the body's height section, issue 11; paper 0.8 with a 4 mm rod)
     body_drag_normal: float = setting(0.71,
@@ -156,11 +156,11 @@ class FrogParameters(Settings):
                                       min=0.0, max=5.0, unit='-')
     # C_bt
     body_drag_tangent: float = setting(0.008,
-                                       'paper: C_bt = 0.008 = C_bn / 100',
+                                       "tangential drag coefficient of the body (eq. 1); paper: C_bt = 0.008 = C_bn / 100",
                                        min=0.0, max=1.0, unit='-')
     # C_a (theoretical value)
     added_mass_coefficient: float = setting(1.0,
-                                            'paper: C_a = 1 (theoretical)',
+                                            'added-mass coefficient (eq. 3); paper: C_a = 1 (theoretical)',
                                             min=0.0, max=3.0, unit='-')
     # --- actuation ---
     # hardware pulse [s] (DESIGN.md; paper 70 ms)

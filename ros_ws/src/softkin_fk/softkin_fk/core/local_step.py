@@ -247,8 +247,69 @@ def _element_volume(P, k):
 
 
 @nb.njit(cache=True, inline='always')
+def actuated_shape(i, rest_centred, kind, ratio, T, dT):
+    """Centred actuated rest shape T of element i (eq. 6-8) and dT/dratio (for the Newton step)."""
+    k = rest_centred.shape[1]
+    for j in range(k):
+        for c in range(3):
+            T[j, c] = rest_centred[i, j, c]
+            dT[j, c] = 0.0
+    if kind == 1:
+        ux = T[1, 0] - T[0, 0]
+        uy = T[1, 1] - T[0, 1]
+        uz = T[1, 2] - T[0, 2]
+        ln = np.sqrt(ux * ux + uy * uy + uz * uz)
+        ux /= ln
+        uy /= ln
+        uz /= ln
+        t = (T[2, 0] - T[0, 0]) * ux + (T[2, 1] - T[0, 1]) * uy + (T[2, 2] - T[0, 2]) * uz
+        f0 = T[0, 0] + t * ux
+        f1 = T[0, 1] + t * uy
+        f2 = T[0, 2] + t * uz
+        for j in range(2):
+            dT[j, 0] = T[j, 0] - f0
+            dT[j, 1] = T[j, 1] - f1
+            dT[j, 2] = T[j, 2] - f2
+            T[j, 0] = f0 + ratio * dT[j, 0]
+            T[j, 1] = f1 + ratio * dT[j, 1]
+            T[j, 2] = f2 + ratio * dT[j, 2]
+    elif kind == 2:
+        sl = np.sqrt(ratio)
+        for tri in range(2):
+            o = 3 * tri
+            g0 = (T[o, 0] + T[o + 1, 0] + T[o + 2, 0]) / 3.0
+            g1 = (T[o, 1] + T[o + 1, 1] + T[o + 2, 1]) / 3.0
+            g2 = (T[o, 2] + T[o + 1, 2] + T[o + 2, 2]) / 3.0
+            for j in range(o, o + 3):
+                for c in range(3):
+                    g = g0 if c == 0 else (g1 if c == 1 else g2)
+                    rel = T[j, c] - g
+                    T[j, c] = g / ratio + sl * rel
+                    dT[j, c] = -g / (ratio * ratio) + 0.5 / sl * rel
+    elif kind == 3:
+        a = ratio ** (1.0 / 3.0)
+        da = a / (3.0 * ratio)
+        for j in range(k):
+            for c in range(3):
+                dT[j, c] = da * T[j, c]
+                T[j, c] *= a
+    if kind != 0:
+        for c in range(3):
+            m = 0.0
+            md = 0.0
+            for j in range(k):
+                m += T[j, c]
+                md += dT[j, c]
+            m /= k
+            md /= k
+            for j in range(k):
+                T[j, c] -= m
+                dT[j, c] -= md
+
+
+@nb.njit(cache=True, inline='always')
 def _element_target(i, x, elements, rest_centred, kind, ratios, passive, shape_parameter,
-                    rest_volume, coef, targets, energy, X, T, M, S, V, R):
+                    rest_volume, coef, targets, energy, X, T, dT, M, S, V, R):
     k = elements.shape[1]
     cx = 0.0
     cy = 0.0
@@ -275,55 +336,7 @@ def _element_target(i, x, elements, rest_centred, kind, ratios, passive, shape_p
         energy[i] = 0.0
         return
     # reference shape to rotate (actuated rest shape), centred
-    for j in range(k):
-        for c in range(3):
-            T[j, c] = rest_centred[i, j, c]
-    if kind == 1:
-        # cable triangle (a, b, apex): shrink along a->b by s about the apex's foot (eq. 6)
-        s = ratios[i]
-        ux = T[1, 0] - T[0, 0]
-        uy = T[1, 1] - T[0, 1]
-        uz = T[1, 2] - T[0, 2]
-        ln = np.sqrt(ux * ux + uy * uy + uz * uz)
-        ux /= ln
-        uy /= ln
-        uz /= ln
-        t = (T[2, 0] - T[0, 0]) * ux + (T[2, 1] - T[0, 1]) * uy + (T[2, 2] - T[0, 2]) * uz
-        fx = T[0, 0] + t * ux
-        fy = T[0, 1] + t * uy
-        fz = T[0, 2] + t * uz
-        for j in range(2):
-            T[j, 0] = fx + s * (T[j, 0] - fx)
-            T[j, 1] = fy + s * (T[j, 1] - fy)
-            T[j, 2] = fz + s * (T[j, 2] - fz)
-    elif kind == 2:
-        # DEA prism: in-plane sqrt(lambda), thickness 1/lambda (eq. 7)
-        lam = ratios[i]
-        sl = np.sqrt(lam)
-        for tri in range(2):
-            o = 3 * tri
-            gx = (T[o, 0] + T[o + 1, 0] + T[o + 2, 0]) / 3.0
-            gy = (T[o, 1] + T[o + 1, 1] + T[o + 2, 1]) / 3.0
-            gz = (T[o, 2] + T[o + 1, 2] + T[o + 2, 2]) / 3.0
-            # the prism centroid is the origin: the triangle centroid moves to g / lambda
-            for j in range(o, o + 3):
-                T[j, 0] = gx / lam + sl * (T[j, 0] - gx)
-                T[j, 1] = gy / lam + sl * (T[j, 1] - gy)
-                T[j, 2] = gz / lam + sl * (T[j, 2] - gz)
-    elif kind == 3:
-        a = ratios[i] ** (1.0 / 3.0)  # eq. 8: volume ratio alpha_i
-        for j in range(k):
-            for c in range(3):
-                T[j, c] *= a
-    if kind != 0:
-        # re-centre (the cable shrink moves the centroid)
-        for c in range(3):
-            m = 0.0
-            for j in range(k):
-                m += T[j, c]
-            m /= k
-            for j in range(k):
-                T[j, c] -= m
+    actuated_shape(i, rest_centred, kind, ratios[i], T, dT)
     # cross-covariance M = X^T T, rotation R maximises tr(R^T M): X ~ T R^T
     for a in range(3):
         for b in range(3):
@@ -365,13 +378,14 @@ def _local_targets_parallel(x, elements, rest_centred, kind, ratios, passive, sh
     for t in nb.prange(nth):
         X = np.empty((k, 3))
         T = np.empty((k, 3))
+        dT = np.empty((k, 3))
         M = np.empty((3, 3))
         S = np.empty((3, 3))
         V = np.empty((3, 3))
         R = np.empty((3, 3))
         for i in range(t * chunk, min(n, (t + 1) * chunk)):
             _element_target(i, x, elements, rest_centred, kind, ratios, passive, shape_parameter,
-                            rest_volume, coef, targets, energy, X, T, M, S, V, R)
+                            rest_volume, coef, targets, energy, X, T, dT, M, S, V, R)
 
 
 @nb.njit(cache=True)
@@ -380,13 +394,14 @@ def _local_targets_serial(x, elements, rest_centred, kind, ratios, passive, shap
     n, k = elements.shape
     X = np.empty((k, 3))
     T = np.empty((k, 3))
+    dT = np.empty((k, 3))
     M = np.empty((3, 3))
     S = np.empty((3, 3))
     V = np.empty((3, 3))
     R = np.empty((3, 3))
     for i in range(n):
         _element_target(i, x, elements, rest_centred, kind, ratios, passive, shape_parameter,
-                        rest_volume, coef, targets, energy, X, T, M, S, V, R)
+                        rest_volume, coef, targets, energy, X, T, dT, M, S, V, R)
 
 
 #: groups with at least this many elements use the multi-threaded kernel

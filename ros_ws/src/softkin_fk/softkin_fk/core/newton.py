@@ -30,7 +30,7 @@ import numba as nb
 import numpy as np
 import scipy.sparse as sp
 
-from .local_step import jacobi_sweeps
+from .local_step import actuated_shape, jacobi_sweeps
 
 try:
     from cvxopt import cholmod as _cholmod
@@ -127,67 +127,6 @@ def _svd3(M, U, s, V, A, w, Q):
 
 
 @nb.njit(cache=True, inline='always')
-def _actuated_shape(i, rest_centred, kind, ratio, T, dT):
-    """Centred actuated rest shape T (eq. 6-8, as the local step) and dT/dratio."""
-    k = rest_centred.shape[1]
-    for j in range(k):
-        for c in range(3):
-            T[j, c] = rest_centred[i, j, c]
-            dT[j, c] = 0.0
-    if kind == 1:
-        ux = T[1, 0] - T[0, 0]
-        uy = T[1, 1] - T[0, 1]
-        uz = T[1, 2] - T[0, 2]
-        ln = np.sqrt(ux * ux + uy * uy + uz * uz)
-        ux /= ln
-        uy /= ln
-        uz /= ln
-        t = (T[2, 0] - T[0, 0]) * ux + (T[2, 1] - T[0, 1]) * uy + (T[2, 2] - T[0, 2]) * uz
-        f0 = T[0, 0] + t * ux
-        f1 = T[0, 1] + t * uy
-        f2 = T[0, 2] + t * uz
-        for j in range(2):
-            dT[j, 0] = T[j, 0] - f0
-            dT[j, 1] = T[j, 1] - f1
-            dT[j, 2] = T[j, 2] - f2
-            T[j, 0] = f0 + ratio * dT[j, 0]
-            T[j, 1] = f1 + ratio * dT[j, 1]
-            T[j, 2] = f2 + ratio * dT[j, 2]
-    elif kind == 2:
-        sl = np.sqrt(ratio)
-        for tri in range(2):
-            o = 3 * tri
-            g0 = (T[o, 0] + T[o + 1, 0] + T[o + 2, 0]) / 3.0
-            g1 = (T[o, 1] + T[o + 1, 1] + T[o + 2, 1]) / 3.0
-            g2 = (T[o, 2] + T[o + 1, 2] + T[o + 2, 2]) / 3.0
-            for j in range(o, o + 3):
-                for c in range(3):
-                    g = g0 if c == 0 else (g1 if c == 1 else g2)
-                    rel = T[j, c] - g
-                    T[j, c] = g / ratio + sl * rel
-                    dT[j, c] = -g / (ratio * ratio) + 0.5 / sl * rel
-    elif kind == 3:
-        a = ratio ** (1.0 / 3.0)
-        da = a / (3.0 * ratio)
-        for j in range(k):
-            for c in range(3):
-                dT[j, c] = da * T[j, c]
-                T[j, c] *= a
-    if kind != 0:
-        for c in range(3):
-            m = 0.0
-            md = 0.0
-            for j in range(k):
-                m += T[j, c]
-                md += dT[j, c]
-            m /= k
-            md /= k
-            for j in range(k):
-                T[j, c] -= m
-                dT[j, c] -= md
-
-
-@nb.njit(cache=True, inline='always')
 def _element_frame(i, x, elements, rest_centred, kind, ratio, X, T, dT, M, U, s, V, A, w, Q):
     """Centred current shape X, actuated shape T (and dT), signed SVD of M = X^T T."""
     k = elements.shape[1]
@@ -199,7 +138,7 @@ def _element_frame(i, x, elements, rest_centred, kind, ratio, X, T, dT, M, U, s,
         m /= k
         for j in range(k):
             X[j, c] -= m
-    _actuated_shape(i, rest_centred, kind, ratio, T, dT)
+    actuated_shape(i, rest_centred, kind, ratio, T, dT)
     for a in range(3):
         for b in range(3):
             acc = 0.0

@@ -128,6 +128,17 @@ class KinematicsNode(Node):
     def _on_change(self, changed: dict) -> None:
         self.kin.settings = from_params(IKSettings, self.p)
 
+    def _solve(self, service: str, job, res):
+        """``job()`` on the solver thread; None (``res`` says why, logged) if refused or failed."""
+        try:
+            return self.worker.call(job)
+        except RequestError as exc:
+            res.success, res.message = False, f"refused: {exc}"
+        except Exception as exc:
+            res.success, res.message = False, f"solver failed: {exc!r}"
+        self.get_logger().error(f"{service} {res.message}")
+        return None
+
     # --- publishing -----------------------------------------------------------------------
     def _publish_command(self, ik, stamp=None, final: bool = True) -> None:
         """Setpoints, tip and shape of a commanded IK solution (worker thread)."""
@@ -207,15 +218,8 @@ class KinematicsNode(Node):
             res.success, res.message = False, f"refused: {problem}"
             self.get_logger().error(f"forward_kinematics {res.message}")
             return res
-        try:
-            fk = self.worker.call(lambda: self.kin.forward(list(req.actuation)))
-        except RequestError as exc:
-            res.success, res.message = False, f"refused: {exc}"
-            self.get_logger().error(f"forward_kinematics {res.message}")
-            return res
-        except Exception as exc:
-            res.success, res.message = False, f"solver failed: {exc!r}"
-            self.get_logger().error(f"forward_kinematics {res.message}")
+        fk = self._solve("forward_kinematics", lambda: self.kin.forward(list(req.actuation)), res)
+        if fk is None:
             return res
         names = sorted(self.kin.mesh.markers)
         res.marker_points = [_point(fk.positions[self.kin.mesh.markers[n]]) for n in names]
@@ -243,15 +247,8 @@ class KinematicsNode(Node):
                                  i_max=int(req.max_iterations))
             self._last_query = r
             return r
-        try:
-            r = self.worker.call(solve)
-        except RequestError as exc:
-            res.success, res.message = False, f"refused: {exc}"
-            self.get_logger().error(f"solve_ik {res.message}")
-            return res
-        except Exception as exc:
-            res.success, res.message = False, f"solver failed: {exc!r}"
-            self.get_logger().error(f"solve_ik {res.message}")
+        r = self._solve("solve_ik", solve, res)
+        if r is None:
             return res
         res.success = bool(r.success)
         res.actuation = [float(v) for v in r.actuation]
