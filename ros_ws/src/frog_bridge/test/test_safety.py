@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from frog_bridge.core.link import LinkState, LinkSupervisor
+from soft_robot_common.link_state import LinkState, LinkSupervisor
 from frog_bridge.core.protection import LimbGuard, PlannedPulse, ProtectionConfig
 from frog_bridge.core.schedule import (
     CANCELLED_OVERLAP, REFUSED_DUTY, REFUSED_INTERVAL, REFUSED_INVALID, REFUSED_STALE, CommandScheduler)

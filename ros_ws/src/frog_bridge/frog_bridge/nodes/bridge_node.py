@@ -36,7 +36,7 @@ from std_srvs.srv import Trigger
 
 from frog_common.primitives import PRIMITIVE_NAMES, limb_label
 from frog_common.settings import from_params
-from frog_bridge.core.link import LinkState, LinkSupervisor
+from soft_robot_common.link_state import LinkState, LinkSupervisor
 from frog_bridge.core.protection import LimbGuard, ProtectionConfig
 from frog_bridge.core.protocol import (
     QUATERNION_ORDERS, DecodeError, Emergency, LineFramer, Quaternion, RelayText, decode_relay_line,
@@ -44,7 +44,7 @@ from frog_bridge.core.protocol import (
 from frog_bridge.core.schedule import (
     CANCELLED_EMERGENCY, CANCELLED_LINK, CANCELLED_SHUTDOWN, CANCELLED_WATCHDOG, REFUSED_EMERGENCY, REFUSED_INVALID,
     REFUSED_LINK, REFUSED_STALLED, CommandScheduler)
-from frog_bridge.core.serial_link import SerialLink
+from soft_robot_common.serial_link import SerialLink
 from frog_bridge.core.watchdog import PrimitiveWatchdog
 
 PARAMS = [
@@ -115,8 +115,8 @@ class BridgeNode(Node):
             self.scheduler = CommandScheduler(
                 LimbGuard(from_params(ProtectionConfig, p)),
                 self.pulse_s, p["max_command_age_s"])
-            self.supervisor = LinkSupervisor(p["reconnect_period_s"], p["reconnect_max_period_s"],
-                                             p["settle_s"], p["stall_timeout_s"])
+            supervisor = LinkSupervisor(p["reconnect_period_s"], p["reconnect_max_period_s"],
+                                        p["settle_s"], p["stall_timeout_s"])
             self.watchdog = PrimitiveWatchdog(p["primitive_timeout_s"])
         except ValueError as exc:
             raise ConfigurationError(str(exc)) from exc
@@ -139,10 +139,9 @@ class BridgeNode(Node):
         self.create_service(Trigger, "~/clear_emergency", self.on_clear_emergency)
         self.create_subscription(Empty, "frog/stop", self.on_stop, qos)
 
-        # The reader thread wakes the executor through a guard condition: all protocol logic
-        # runs in the executor thread.
-        self._wake = self.create_guard_condition(self.on_link_events)
-        self.link = SerialLink(p["port"], p["baud"], self.supervisor, self._wake.trigger, p["write_timeout_s"])
+        # The reader thread wakes the executor: all protocol logic runs in the executor thread.
+        self.link = SerialLink.for_node(self, self.on_link_events, p["port"], p["baud"], supervisor,
+                                        p["write_timeout_s"])
         # Device supervision (settle, stall) runs on a steady clock: the device runs in real time
         # even when the graph runs on simulated time. Commands and stamps use the node clock.
         self.create_timer(0.1, self.supervise, clock=self._steady)
@@ -165,10 +164,6 @@ class BridgeNode(Node):
     # -- helpers -----------------------------------------------------------------------
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
-
-    def _state(self) -> LinkState:
-        with self.link.lock:
-            return self.supervisor.state
 
     # -- commands in -------------------------------------------------------------------
     def on_primitive(self, msg) -> None:
@@ -227,9 +222,8 @@ class BridgeNode(Node):
             self._refuse(REFUSED_LINK, f"{what}: the node clock has not started (use_sim_time and no /clock yet)",
                          throttle=True)
             return False
-        now = time.monotonic()
-        with self.link.lock:
-            state, stalled, age = self.supervisor.state, self.supervisor.stalled(now), self.supervisor.line_age(now)
+        link = self.link.snapshot()
+        state, stalled, age = link.state, link.stalled, link.line_age
         if state is LinkState.READY and stalled and self.cfg["stall_blocks_actuation"]:
             since = "ever" if age is None else f"{age:.1f} s"
             self._refuse(REFUSED_STALLED, f"{what}: link stalled (no line from the relay for {since})", throttle=True)
@@ -332,8 +326,7 @@ class BridgeNode(Node):
             if isinstance(item, DecodeError):
                 self._decode_error(item)
                 continue
-            with self.link.lock:
-                self.supervisor.line_received(at)
+            self.link.line_received(at)
             self.counts["lines_received"] += 1
             r = decode_relay_line(item, self.cfg["quaternion_order"], self.cfg["quaternion_norm_tolerance"])
             if isinstance(r, Quaternion):
@@ -366,8 +359,7 @@ class BridgeNode(Node):
         self.imu_pub.publish(msg)
 
     def _emergency(self, text: str) -> None:
-        with self.link.lock:
-            new = self.supervisor.emergency(text)
+        new = self.link.emergency(text)
         self.counts["emergency_lines"] += 1
         if new:
             n = len(self.scheduler.cancel_all(CANCELLED_EMERGENCY))
@@ -389,9 +381,8 @@ class BridgeNode(Node):
         stopped, self.stop_reason = self.stop_reason, None
         if stopped:
             self.get_logger().info("stop cleared")
-        with self.link.lock:
-            was = self.supervisor.clear_emergency()
-            state = self.supervisor.state
+        was = self.link.clear_emergency()
+        state = self.link.snapshot().state
         response.success = True
         if was:
             response.message = f"emergency cleared; link is {state.value}"
@@ -405,25 +396,21 @@ class BridgeNode(Node):
     def supervise(self) -> None:
         self._check_watchdog()
         now = time.monotonic()
-        with self.link.lock:
-            settled = self.supervisor.settled(now)
-        if settled:
+        if self.link.settled(now):
             # "\n" ends any partial line an interrupted write left in the relay's buffer
             problem = self.link.write_line(b"\n" + encode_set_pulse(self.cfg["pulse_ms"]))
             if problem:
                 self.get_logger().error(f"initialisation failed: {problem}")
                 return
-            with self.link.lock:
-                self.supervisor.ready(now)
-                state = self.supervisor.state
+            self.link.ready(now)
+            state = self.link.snapshot(now).state
             self.counts["lines_written"] += 1
             after = f" (reconnected {now - self.lost_at:.2f} s after the loss)" if self.lost_at else ""
             self.get_logger().info(f"link ready: sent 'p {self.cfg['pulse_ms']}'{after}; state {state.value}")
             self.lost_at = None
             self.publish_diagnostics()
-        with self.link.lock:
-            stalled = self.supervisor.stalled(now)
-            age = self.supervisor.line_age(now)
+        link = self.link.snapshot(now)
+        stalled, age = link.stalled, link.line_age
         if stalled != self.was_stalled:
             self.was_stalled = stalled
             if stalled:
@@ -433,11 +420,9 @@ class BridgeNode(Node):
                 self.get_logger().info("link alive again: lines from the relay resumed")
 
     def publish_diagnostics(self) -> None:
-        now = time.monotonic()
-        with self.link.lock:
-            sup = self.supervisor
-            state, stalled, age = sup.state, sup.stalled(now), sup.line_age(now)
-            problem, losses, emergency = sup.last_problem, sup.losses, sup.emergency_text
+        link = self.link.snapshot()
+        state, stalled, age = link.state, link.stalled, link.line_age
+        problem, losses, emergency = link.last_problem, link.losses, link.emergency_text
         if state is LinkState.EMERGENCY:
             level, message = DiagnosticStatus.ERROR, f"EMERGENCY latched: {emergency}; call ~/clear_emergency"
         elif state is LinkState.DISCONNECTED:
@@ -457,7 +442,7 @@ class BridgeNode(Node):
         values = {
             "state": state.value, "port": self.cfg["port"], "stalled": str(stalled).lower(),
             "last_line_age_s": "nan" if age is None else f"{age:.3f}", "link_losses": str(losses),
-            "bytes_read": str(self.link.bytes_read), "bytes_written": str(self.link.bytes_written),
+            "bytes_read": str(link.bytes_read), "bytes_written": str(link.bytes_written),
             "write_latency_ms_median": f"{statistics.median(lat):.3f}" if lat else "nan",
             "write_latency_ms_max": f"{max(lat):.3f}" if lat else "nan",
             "emergency": emergency,

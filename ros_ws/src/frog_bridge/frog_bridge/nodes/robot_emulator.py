@@ -38,7 +38,7 @@ from frog_bridge.core.emulator import (
 from frog_common.primitives import limb_label
 from frog_bridge.core.protocol import (
     QUATERNION_ORDERS, DecodeError, LineFramer, SetPulse, encode_emergency, encode_quaternion, excerpt)
-from frog_bridge.core.pty_device import OpenedDevice, PtyDevice
+from soft_robot_common.pty_device import OpenedDevice, PtyDevice
 from frog_common.se2 import quaternion_yaw, yaw_quaternion
 
 PARAMS = [

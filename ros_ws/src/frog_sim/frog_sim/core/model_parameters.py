@@ -89,7 +89,8 @@ class FrogParameters(Settings):
                                         min=100000.0, max=100000000.0, unit='Pa')
     # E_max [Pa] (paper; x2.68 while SMA is heated)
     limb_young_heated: float = setting(8.04e6,
-                                       "limb Young's modulus while the SMA is heated (actuation phase); paper: E_max = 8.04 MPa",
+                                       "limb Young's modulus while the SMA is heated (actuation phase); "
+                                       'paper: E_max = 8.04 MPa',
                                        min=100000.0, max=100000000.0, unit='Pa')
     # EGaIn volume % of the interface layer
     egain_vol_pct: float = setting(10.0,
@@ -156,7 +157,8 @@ class FrogParameters(Settings):
                                       min=0.0, max=5.0, unit='-')
     # C_bt
     body_drag_tangent: float = setting(0.008,
-                                       "tangential drag coefficient of the body (eq. 1); paper: C_bt = 0.008 = C_bn / 100",
+                                       'tangential drag coefficient of the body (eq. 1); '
+                                       'paper: C_bt = 0.008 = C_bn / 100',
                                        min=0.0, max=1.0, unit='-')
     # C_a (theoretical value)
     added_mass_coefficient: float = setting(1.0,

@@ -20,7 +20,6 @@ import os
 import select
 import threading
 import time
-import tty
 
 import numpy as np
 from rclpy.duration import Duration
@@ -28,6 +27,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from soft_robot_common import (ConfigurationError, NodeDiagnostics, Param, PathClaim, declare_parameters,
                                namespaced_path, run_node)
+from soft_robot_common.pty_device import PtyDevice
 from std_srvs.srv import Trigger
 
 from ..core.marlin_board import MarlinBoard
@@ -65,7 +65,7 @@ class MarlinEmulator(Node):
             raise ConfigurationError(problem)
         self.board = MarlinBoard(axes=self.map.axes, steps_per_unit=p["steps_per_unit"], buffer_size=p["buffer_size"])
         self._lock = threading.Lock()
-        self._fd = self._slave = None
+        self.device = None
         link = p["port_link"]
         if os.path.lexists(link) and not os.path.islink(link):
             raise ConfigurationError(f"port_link {link!r} exists and is not a symbolic link; refusing to replace it")
@@ -74,6 +74,7 @@ class MarlinEmulator(Node):
             self._transcript = open(p["transcript"], "a", buffering=1) if p["transcript"] else None
         except OSError as exc:
             raise ConfigurationError(f"transcript {p['transcript']!r}: {exc.strerror}") from None
+        self.device = PtyDevice(link)
         self._plug()
         self.pub_state = self.create_publisher(JointState, "finger/emulator/motor_state", 10)
         self.pub_end = self.create_publisher(JointState, "finger/emulator/move_end", 100)
@@ -86,49 +87,28 @@ class MarlinEmulator(Node):
         self._thread.start()
         self.lines_received = 0
         self.diagnostics = NodeDiagnostics(self, "emulated board", self._diagnostics, hardware_id=p["port_link"])
-        self.get_logger().info(f"emulated Marlin board on {p['port_link']} -> {self._device}")
+        self.get_logger().info(f"emulated Marlin board on {p['port_link']} -> {self.device.device_path}")
 
     # --- the pty ------------------------------------------------------------------------
     def _plug(self) -> None:
-        fd, slave = os.openpty()
-        tty.setraw(fd)
-        tty.setraw(slave)
-        os.set_blocking(fd, False)   # a host that does not read must not stall the motion model
-        self._device = os.ttyname(slave)
-        link = self.p["port_link"]
-        tmp = f"{link}.tmp{os.getpid()}"
-        if os.path.lexists(tmp):
-            os.unlink(tmp)
-        os.symlink(self._device, tmp)
-        os.replace(tmp, link)     # atomic: the link always points at a live device or is absent
-        self._fd, self._slave = fd, slave
+        # non-blocking device: a host that does not read must not stall the motion model
+        self.device.plug()
         self._buf = b""
         with self._lock:
             self.board.reset()    # a board that appears has just powered up: banner
 
-    def _close_pty(self) -> None:
-        link = self.p["port_link"]
-        if os.path.islink(link) and os.readlink(link) == self._device:
-            os.unlink(link)
-        for fd in (self._fd, self._slave):
-            if fd is not None:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
-        self._fd = self._slave = None
-
     def _serve(self) -> None:
         while self._running:
-            fd = self._fd
+            fd = self.device.controller
             if fd is None:
                 time.sleep(0.01)
                 continue
             try:
-                r, _, _ = select.select([fd], [], [], 0.002)
-                data = os.read(fd, 4096) if r else b""
-            except OSError:    # no one has the device open (EIO) or it was closed
-                data = b""
+                readable = bool(select.select([fd], [], [], 0.002)[0])
+                data = self.device.read() if readable else b""
+            except (OSError, ValueError):    # unplugged meanwhile (~/unplug runs in the executor)
+                readable, data = False, b""
+            if readable and not data:        # EIO: no one has the device open
                 time.sleep(0.005)
             now = time.monotonic()
             with self._lock:
@@ -144,19 +124,17 @@ class MarlinEmulator(Node):
                 self.board.tick(now)
                 out = self.board.take_output()
                 ends = self.board.take_completed()
-            if out and self._fd is not None:
-                try:
-                    os.write(self._fd, ("\n".join(out) + "\n").encode("ascii"))
-                except OSError:
-                    pass
+            if out:
+                self.device.write(("\n".join(out) + "\n").encode("ascii"))
             for t_end, steps in ends:   # stamped when the model's move ended, however late the thread woke
                 self.pub_end.publish(self._state(steps, np.zeros(len(steps)), age=time.monotonic() - t_end))
 
     def _diagnostics(self):
         from soft_robot_common.diagnostics import OK, WARN
-        values = {"port_link": self.p["port_link"], "device": self._device if self._fd is not None else "",
-                  "lines_received": self.lines_received}
-        if self._fd is None:
+        plugged = self.device.plugged
+        values = {"port_link": self.p["port_link"], "device": self.device.device_path if plugged else "",
+                  "lines_received": self.lines_received, "dropped_bytes": self.device.dropped_bytes}
+        if not plugged:
             return WARN, "unplugged (fault injected): waiting for ~/replug", values
         if self.lines_received == 0:
             return OK, "waiting for G-code from the host", values
@@ -199,30 +177,30 @@ class MarlinEmulator(Node):
         return res
 
     def _garbage(self, req, res):
-        if self._fd is not None:
-            os.write(self._fd, bytes(np.random.default_rng().integers(0, 256, 64, dtype=np.uint8)) + b"\n")
+        if self.device.plugged:
+            self.device.write(bytes(np.random.default_rng().integers(0, 256, 64, dtype=np.uint8)) + b"\n")
         res.success, res.message = True, "64 random bytes sent"
         return res
 
     def _unplug(self, req, res):
-        self._close_pty()
+        self.device.unplug()
         self.get_logger().warn("unplugged: the device and its link are gone")
         res.success, res.message = True, "unplugged"
         return res
 
     def _replug(self, req, res):
-        if self._fd is None:
+        if not self.device.plugged:
             self._plug()
-            self.get_logger().info(f"plugged in again as {self._device}")
-        res.success, res.message = True, f"device {self._device}"
+            self.get_logger().info(f"plugged in again as {self.device.device_path}")
+        res.success, res.message = True, f"device {self.device.device_path}"
         return res
 
     def destroy_node(self):
         self._running = False
         if getattr(self, "_thread", None) is not None:
             self._thread.join(1.0)
-        if getattr(self, "_fd", None) is not None or getattr(self, "_device", None):
-            self._close_pty()
+        if getattr(self, "device", None) is not None:
+            self.device.unplug()
         if getattr(self, "_claim", None) is not None:
             self._claim.release()
         if getattr(self, "_transcript", None) is not None:

@@ -16,21 +16,26 @@ and disables the motors (``M18``); setpoints are refused until ``~/resume``. Shu
 same. A board reset (``start`` mid-session) or a vanished device is logged; the driver
 reconnects, re-initialises and restores the last reported position with ``G92``.
 ``diagnostics``: link state, queue depth, lines in flight, errors, resends, refusals.
+
+The port is a :class:`soft_robot_common.serial_link.SerialLink` (the bridge's design: its
+thread reads and reconnects, the protocol runs in the executor). Link states: disconnected,
+connecting (until the banner or ``banner_timeout``), ready, halted (Marlin's kill(), the
+link's emergency latch, cleared by the board's reset banner or a reconnect).
 """
 from __future__ import annotations
 
 import dataclasses
-
-import threading
 import time
 
 import numpy as np
-import serial
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, namespaced_path, run_node
+from soft_robot_common.link_state import LinkState, LinkSupervisor
+from soft_robot_common.serial_link import SerialLink
 from std_srvs.srv import Trigger
 
 from ..core.marlin import GcodeSender, format_axes, parse_reply
@@ -64,6 +69,17 @@ PARAMS = [
 ]
 
 
+#: a link state as this driver names it (Marlin's kill() is the link's emergency latch)
+LINK_NAMES = {LinkState.DISCONNECTED: "disconnected", LinkState.CONNECTING: "connecting",
+              LinkState.READY: "ready", LinkState.EMERGENCY: "halted"}
+LINK_LEVELS = {LinkState.DISCONNECTED: DiagnosticStatus.ERROR, LinkState.CONNECTING: DiagnosticStatus.WARN,
+               LinkState.READY: DiagnosticStatus.OK, LinkState.EMERGENCY: DiagnosticStatus.ERROR}
+#: longest text without a line end kept from the board (more is noise)
+MAX_LINE_BYTES = 4096
+#: a write to the board that cannot complete within this is a lost link [s]
+WRITE_TIMEOUT_S = 1.0
+
+
 class StepperDriver(Node):
     NODE_NAME = "stepper_driver"
 
@@ -81,11 +97,7 @@ class StepperDriver(Node):
         problem = self.map.problem()
         if problem:
             raise ConfigurationError(problem)
-        self._lock = threading.Lock()
         self.sender = GcodeSender(window=p["window"])
-        self.state = "disconnected"       # disconnected | connecting | ready | stopped | halted
-        self._halt_line = ""              # Marlin's kill() message while halted (until its reset banner)
-        self._ser = None
         n = len(self.map.joints)
         self.commanded = np.zeros(n, np.int64)   # steps of the last queued move (board's plan)
         self.reported = None                     # steps the board last reported (M114 Count)
@@ -94,9 +106,9 @@ class StepperDriver(Node):
         self._last_move = None                   # time of the last G1 queued, until its M400
         self._last_ok = time.monotonic()
         self._last_poll = 0.0
-        self._opened_at = 0.0
-        self._next_open = 0.0
         self._banner = False
+        self._buf = b""
+        self._warned_open = False
         self.stats = dict(errors=0, unknown=0, garbage=0, refused=0, moves=0, resets=0, reconnects=0, lost_oks=0)
         self.pub_state = self.create_publisher(JointState, "finger/stepper_state", 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
@@ -104,19 +116,26 @@ class StepperDriver(Node):
                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
         self.create_service(Trigger, "~/stop", self._srv_stop)
         self.create_service(Trigger, "~/resume", self._srv_resume)
-        self.create_timer(1.0, self._publish_diagnostics)
-        self._running = True
-        self._thread = threading.Thread(target=self._serve, name="marlin_serial", daemon=True)
-        self._thread.start()
+        # the board runs in real time whatever the node clock: supervision on a steady clock
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
+        self.create_timer(0.02, self._housekeeping, clock=steady)
+        # no backoff (the period is the user's), banner_timeout is the settle time, no stall check
+        supervisor = LinkSupervisor(p["reconnect_period"], p["reconnect_period"], p["banner_timeout"], 0.0)
+        self.link = SerialLink.for_node(self, self._on_link_events, p["port"], p["baud"], supervisor,
+                                        WRITE_TIMEOUT_S)
+        self.link.start()
         self.get_logger().info(f"driving {self.map.joints} on axes {self.map.axes} through {p['port']} "
                                f"({self.map.steps_per_metre:.1f} microsteps per m of cable)")
 
     def _on_change(self, changed: dict) -> None:
-        with self._lock:
-            self.map.max_cable_speed = self.p["max_cable_speed"]
-            self.map.max_feedrate = self.p["max_feedrate"]
+        self.map.max_cable_speed = self.p["max_cable_speed"]
+        self.map.max_feedrate = self.p["max_feedrate"]
 
-    # --- setpoints (executor thread) ----------------------------------------------------
+    def _link_state(self) -> LinkState:
+        return self.link.snapshot().state
+
+    # --- setpoints ----------------------------------------------------------------------
     def _refuse(self, why: str, level: str = "error") -> None:
         self.stats["refused"] += 1
         if level == "warn":    # rclpy wants one severity per call site
@@ -139,45 +158,45 @@ class StepperDriver(Node):
         if problem:
             self._refuse(problem)
             return
-        with self._lock:
-            if self._stopped:
-                self._refuse("the driver is stopped (call ~/resume)", "warn")
-                return
-            if self.state != "ready":
-                self._refuse(f"link {self.state}: not sent (nothing is replayed later)", "warn")
-                return
-            if self.sender.queue_depth >= self.p["max_queue"]:
-                self._refuse(f"{self.sender.queue_depth} commands are waiting (max_queue)")
-                return
-            steps = self.map.pull_to_steps(pulls)
-            values, feed, duration = self.map.move(self.commanded, steps)
-            if not values:
-                return     # already there to the microstep
-            self.sender.enqueue(format_axes("G1", values) + f" F{feed:.2f}")
-            self.commanded = steps
-            now = time.monotonic()
-            self._motion_until = max(now, self._motion_until) + duration
-            self._last_move = now
-            self.stats["moves"] += 1
+        if self._stopped:
+            self._refuse("the driver is stopped (call ~/resume)", "warn")
+            return
+        state = self._link_state()
+        if state is not LinkState.READY:
+            self._refuse(f"link {LINK_NAMES[state]}: not sent (nothing is replayed later)", "warn")
+            return
+        if self.sender.queue_depth >= self.p["max_queue"]:
+            self._refuse(f"{self.sender.queue_depth} commands are waiting (max_queue)")
+            return
+        steps = self.map.pull_to_steps(pulls)
+        values, feed, duration = self.map.move(self.commanded, steps)
+        if not values:
+            return     # already there to the microstep
+        self.sender.enqueue(format_axes("G1", values) + f" F{feed:.2f}")
+        self.commanded = steps
+        now = time.monotonic()
+        self._motion_until = max(now, self._motion_until) + duration
+        self._last_move = now
+        self.stats["moves"] += 1
+        self._write_ready()
 
     # --- services -----------------------------------------------------------------------
     def _emergency_stop(self) -> bool:
         """Drop queued moves, M410 + M18; True if they were written to the board."""
-        with self._lock:
-            dropped = self.sender.abort()
-            written = False
-            if self._ser is not None and self.state in ("ready", "stopped", "halted"):
-                try:
-                    self._ser.write((self.sender.send_unnumbered("M410") + "\n").encode("ascii"))
-                    written = True
-                except (serial.SerialException, OSError) as exc:
-                    self.get_logger().error(f"stop: writing M410 failed: {exc}")
-                self.sender.enqueue("M18")
-                self.sender.enqueue("M114")
-            self._last_move = None
-            self._motion_until = 0.0
+        dropped = self.sender.abort()
+        written = False
+        if self._link_state() in (LinkState.READY, LinkState.EMERGENCY):
+            problem = self.link.write_line((self.sender.send_unnumbered("M410") + "\n").encode("ascii"))
+            if problem:
+                self.get_logger().error(f"stop: writing M410 failed: {problem}")
+            written = problem is None
+            self.sender.enqueue("M18")
+            self.sender.enqueue("M114")
+        self._last_move = None
+        self._motion_until = 0.0
         self.get_logger().warn(f"STOP: {dropped} queued commands dropped, M410 (quickstop) and M18 (motors off) "
                                + ("sent" if written else "not sent: no link"))
+        self._write_ready()
         return written
 
     def _srv_stop(self, req, res):
@@ -188,79 +207,44 @@ class StepperDriver(Node):
         return res
 
     def _srv_resume(self, req, res):
-        with self._lock:
-            self._stopped = False
-            if self.state == "stopped":   # (re)initialised while stopped: the link is ready
-                self.state = "ready"
-            if self.reported is not None:
-                self.commanded = self.reported.copy()   # M410 left the plan where the motors stopped
+        self._stopped = False
+        if self.reported is not None:
+            self.commanded = self.reported.copy()   # M410 left the plan where the motors stopped
         self.get_logger().info("resumed: setpoints are accepted again")
         res.success, res.message = True, "resumed"
         return res
 
-    # --- serial thread ------------------------------------------------------------------
-    def _serve(self) -> None:
-        buf = b""
-        while self._running:
-            if self._ser is None:
-                self._try_open()
-                buf = b""
-                continue
-            try:
-                data = self._ser.read(self._ser.in_waiting or 1)
-            except (serial.SerialException, OSError, TypeError) as exc:
-                self._link_lost(f"read failed: {exc}")
-                continue
-            if data:
-                buf += data
-                while b"\n" in buf:
-                    raw, buf = buf.split(b"\n", 1)
-                    self._handle(raw.decode("ascii", errors="replace").strip("\r\x00 "))
-            if len(buf) > 4096:      # no line end in 4 kB: noise
-                self.stats["garbage"] += 1
-                buf = b""
-            try:
-                self._housekeeping()
-                self._write_ready()
-            except (serial.SerialException, OSError) as exc:
-                self._link_lost(f"write failed: {exc}")
-
-    def _try_open(self) -> None:
-        now = time.monotonic()
-        if now < self._next_open:
-            time.sleep(min(0.05, self._next_open - now))
-            return
-        self._next_open = now + self.p["reconnect_period"]
-        try:
-            ser = serial.Serial(self.p["port"], self.p["baud"], timeout=0.01, write_timeout=1.0)
-        except (serial.SerialException, OSError) as exc:
-            if self.state != "disconnected" or not getattr(self, "_warned_open", False):
-                self.get_logger().warn(f"cannot open {self.p['port']}: {exc}; retrying every "
-                                       f"{self.p['reconnect_period']} s")
+    # --- the link's events (from its thread, through the executor) -----------------------
+    def _on_link_events(self) -> None:
+        for ev in self.link.events():
+            if ev.kind == "data":
+                self._on_data(ev.data)
+            elif ev.kind == "opened":
+                self.sender.reset()
+                self._banner = False
+                self._buf = b""
+                self._warned_open = False
+                self.get_logger().info(f"opened {self.p['port']}: waiting for the board's banner")
+            elif ev.kind == "lost":
+                self.sender.reset()
+                self._last_move = None
+                self.stats["reconnects"] += 1
+                self.link.clear_emergency()     # a board that comes back has been reset
+                self.get_logger().error(f"link to the board lost ({ev.text}); reconnecting, queued moves dropped")
+            elif ev.kind == "open_failed" and not self._warned_open:
                 self._warned_open = True
-            return
-        with self._lock:
-            self._ser = ser
-            self.sender.reset()
-            self.state = "connecting"
-            self._banner = False
-            self._opened_at = time.monotonic()
-        self._warned_open = False
-        self.get_logger().info(f"opened {self.p['port']}: waiting for the board's banner")
+                self.get_logger().warn(f"cannot open {self.p['port']}: {ev.text}; retrying every "
+                                       f"{self.p['reconnect_period']} s")
+        self._write_ready()
 
-    def _link_lost(self, why: str) -> None:
-        with self._lock:
-            ser, self._ser = self._ser, None
-            self.state = "disconnected"
-            self.sender.reset()
-            self._last_move = None
-            self.stats["reconnects"] += 1
-        if ser is not None:
-            try:
-                ser.close()
-            except (serial.SerialException, OSError):
-                pass
-        self.get_logger().error(f"link to the board lost ({why}); reconnecting, queued moves dropped")
+    def _on_data(self, data: bytes) -> None:
+        self._buf += data
+        while b"\n" in self._buf:
+            raw, self._buf = self._buf.split(b"\n", 1)
+            self._handle(raw.decode("ascii", errors="replace").strip("\r\x00 "))
+        if len(self._buf) > MAX_LINE_BYTES:      # no line end: noise
+            self.stats["garbage"] += 1
+            self._buf = b""
 
     def _initialise(self) -> None:
         """After the banner (or its timeout): units, absolute mode, the known position."""
@@ -270,7 +254,7 @@ class StepperDriver(Node):
         self.sender.enqueue("G90")
         self.sender.enqueue(format_axes("G92", dict(zip(self.map.axes, self.map.steps_to_axis(pos)))))
         self.sender.enqueue("M114")
-        self.state = "stopped" if self._stopped else "ready"
+        self.link.ready(time.monotonic())
         self._last_ok = time.monotonic()
         self.get_logger().info(f"board ready (banner {'seen' if self._banner else 'not seen'}); position set to "
                                f"{np.round(self.map.steps_to_pull(pos) * 1e3, 4).tolist()} mm of pull")
@@ -280,105 +264,110 @@ class StepperDriver(Node):
             return
         r = parse_reply(line)
         log = self.get_logger()
-        with self._lock:
-            if r.kind == "ok":
-                self.sender.on_ok()
-                self._last_ok = time.monotonic()
-            elif r.kind == "resend":
-                if not self.sender.on_resend(r.line):
-                    log.error(f"board asked to resend line {r.line}, which is no longer known: re-synchronising")
-                    self.sender.abort()
-                else:
-                    log.warn(f"board asked to resend from line {r.line}")
-            elif r.kind == "position":
-                try:
-                    self.reported = np.array([r.counts[a] for a in self.map.axes], np.int64)
-                except KeyError:
-                    log.warn(f"position report without all axes {self.map.axes}: {line!r}")
-                    return
-                js = JointState()
-                js.header.stamp = self.get_clock().now().to_msg()
-                js.name = list(self.map.joints)
-                js.position = [float(v) for v in self.map.steps_to_pull(self.reported)]
-                self.pub_state.publish(js)
-            elif r.kind == "start":
-                if self.state == "connecting":
-                    self._banner = True
-                else:
-                    self.stats["resets"] += 1
-                    log.warn("the board reset (start banner mid-session): queued moves dropped, re-initialising")
-                    self.sender.reset()
-                    self._last_move = None
-                    self._initialise()
-            elif r.kind == "error":
-                self.stats["errors"] += 1
-                if any(w in line for w in ("halted", "kill() called", "stopped due to errors")):
-                    # Marlin's kill(): the board ignores motion until it is reset
-                    self.state, self._halt_line = "halted", line
-                    log.error(f"board halted ({line}): setpoints are refused until the board is reset "
-                              "(reset button, power, or reconnect)")
-                else:
-                    log.warn(f"board: {line}")
-            elif r.kind == "echo":
-                if "Unknown command" in line:
-                    self.stats["unknown"] += 1
-                    log.warn(f"board: {line}")
-                else:
-                    log.debug(f"board: {line}")
-            elif r.kind == "busy":
-                log.debug(f"board: {line}")
+        if r.kind == "ok":
+            self.sender.on_ok()
+            self._last_ok = time.monotonic()
+        elif r.kind == "resend":
+            if not self.sender.on_resend(r.line):
+                log.error(f"board asked to resend line {r.line}, which is no longer known: re-synchronising")
+                self.sender.abort()
             else:
-                self.stats["garbage"] += 1
-                log.warn(f"unrecognised line from the board ignored: {line[:80]!r}", throttle_duration_sec=2.0)
+                log.warn(f"board asked to resend from line {r.line}")
+        elif r.kind == "position":
+            try:
+                self.reported = np.array([r.counts[a] for a in self.map.axes], np.int64)
+            except KeyError:
+                log.warn(f"position report without all axes {self.map.axes}: {line!r}")
+                return
+            js = JointState()
+            js.header.stamp = self.get_clock().now().to_msg()
+            js.name = list(self.map.joints)
+            js.position = [float(v) for v in self.map.steps_to_pull(self.reported)]
+            self.pub_state.publish(js)
+        elif r.kind == "start":
+            if self._link_state() is LinkState.CONNECTING:
+                self._banner = True
+            else:
+                self.stats["resets"] += 1
+                log.warn("the board reset (start banner mid-session): queued moves dropped, re-initialising")
+                self.sender.reset()
+                self._last_move = None
+                self.link.clear_emergency()
+                self._initialise()
+        elif r.kind == "error":
+            self.stats["errors"] += 1
+            if any(w in line for w in ("halted", "kill() called", "stopped due to errors")):
+                # Marlin's kill(): the board ignores motion until it is reset
+                self.link.emergency(line)
+                log.error(f"board halted ({line}): setpoints are refused until the board is reset "
+                          "(reset button, power, or reconnect)")
+            else:
+                log.warn(f"board: {line}")
+        elif r.kind == "echo":
+            if "Unknown command" in line:
+                self.stats["unknown"] += 1
+                log.warn(f"board: {line}")
+            else:
+                log.debug(f"board: {line}")
+        elif r.kind == "busy":
+            log.debug(f"board: {line}")
+        else:
+            self.stats["garbage"] += 1
+            log.warn(f"unrecognised line from the board ignored: {line[:80]!r}", throttle_duration_sec=2.0)
 
+    # --- housekeeping (steady timer) -----------------------------------------------------
     def _housekeeping(self) -> None:
         now = time.monotonic()
-        with self._lock:
-            if self.state == "connecting":
-                if self._banner or now - self._opened_at > self.p["banner_timeout"]:
-                    self._initialise()
-                return
-            s = self.sender
-            if s.in_flight and now > max(self._last_ok, self._motion_until) + self.p["ok_timeout"]:
-                self.stats["lost_oks"] += 1
-                self.get_logger().warn(f"no ok for {s.in_flight_commands()[0]!r} within {self.p['ok_timeout']} s: "
-                                       "taking it as lost")
-                s.on_ok()
-                self._last_ok = now
-            settle = self.p["settle_time"]
-            if settle > 0 and self._last_move is not None and now - self._last_move > settle:
-                s.enqueue("M400")     # the burst (trajectory) is over: wait for the motion
-                s.enqueue("M114")
-                self._last_move = None
-            poll = self.p["poll_period"]
-            if poll > 0 and now - self._last_poll > poll and "M114" not in s.pending and \
-                    "M114" not in s.in_flight_commands():
-                s.enqueue("M114")
-                self._last_poll = now
+        if self._link_state() is LinkState.CONNECTING:
+            if self._banner or self.link.settled(now):
+                self._initialise()
+                self._write_ready()
+            return
+        s = self.sender
+        if s.in_flight and now > max(self._last_ok, self._motion_until) + self.p["ok_timeout"]:
+            self.stats["lost_oks"] += 1
+            self.get_logger().warn(f"no ok for {s.in_flight_commands()[0]!r} within {self.p['ok_timeout']} s: "
+                                   "taking it as lost")
+            s.on_ok()
+            self._last_ok = now
+        settle = self.p["settle_time"]
+        if settle > 0 and self._last_move is not None and now - self._last_move > settle:
+            s.enqueue("M400")     # the burst (trajectory) is over: wait for the motion
+            s.enqueue("M114")
+            self._last_move = None
+        poll = self.p["poll_period"]
+        if poll > 0 and now - self._last_poll > poll and "M114" not in s.pending and \
+                "M114" not in s.in_flight_commands():
+            s.enqueue("M114")
+            self._last_poll = now
+        self._write_ready()
 
     def _write_ready(self) -> None:
-        with self._lock:
-            if self._ser is None or self.state == "connecting":
+        """Write what the ok window allows (also while halted: M18 and M114 after a stop)."""
+        if self._link_state() not in (LinkState.READY, LinkState.EMERGENCY):
+            return
+        lines = self.sender.sendable()
+        if lines:
+            problem = self.link.write_line(("\n".join(lines) + "\n").encode("ascii"))
+            if problem:     # the link thread reports the loss; the sender is reset then
                 return
-            lines = self.sender.sendable()
-            if lines:
-                self._ser.write(("\n".join(lines) + "\n").encode("ascii"))
-                for line in lines:
-                    self.get_logger().debug(f"sent {line}")
+            for line in lines:
+                self.get_logger().debug(f"sent {line}")
 
     # --- diagnostics / shutdown ---------------------------------------------------------
     def _publish_diagnostics(self) -> None:
-        level = {"ready": DiagnosticStatus.OK, "connecting": DiagnosticStatus.WARN,
-                 "disconnected": DiagnosticStatus.ERROR, "halted": DiagnosticStatus.ERROR}.get(self.state,
-                                                                                              DiagnosticStatus.WARN)
-        state = "stopped" if self._stopped else self.state
-        if self.state == "halted":
-            state = f"halted ({self._halt_line}): waiting for the board's reset"
-        with self._lock:
-            vals = dict(port=self.p["port"], link=state, queue_depth=self.sender.queue_depth,
-                        in_flight=len(self.sender.in_flight), resends=self.sender.resends, **self.stats)
-            if self.reported is not None:
-                vals["reported_pull_mm"] = str(np.round(self.map.steps_to_pull(self.reported) * 1e3, 4).tolist())
+        link = self.link.snapshot()
+        state = "stopped" if self._stopped else LINK_NAMES[link.state]
+        if link.state is LinkState.EMERGENCY:
+            state = f"halted ({link.emergency_text}): waiting for the board's reset"
+        level = DiagnosticStatus.WARN if self._stopped and link.state is LinkState.READY else LINK_LEVELS[link.state]
+        vals = dict(port=self.p["port"], link=state, queue_depth=self.sender.queue_depth,
+                    in_flight=len(self.sender.in_flight), resends=self.sender.resends, **self.stats,
+                    link_losses=link.losses, bytes_read=link.bytes_read, bytes_written=link.bytes_written)
+        if link.state is LinkState.DISCONNECTED and link.last_problem:
+            vals["last_problem"] = link.last_problem
+        if self.reported is not None:
+            vals["reported_pull_mm"] = str(np.round(self.map.steps_to_pull(self.reported) * 1e3, 4).tolist())
         st = DiagnosticStatus(name=f"{self.get_name()}: Marlin link", hardware_id=self.p["port"], level=level,
                               message=state, values=[KeyValue(key=k, value=str(v)) for k, v in vals.items()])
         arr = DiagnosticArray(status=[st])
@@ -386,26 +375,20 @@ class StepperDriver(Node):
         self.pub_diag.publish(arr)
 
     def close(self) -> None:
-        """Shutdown: quick-stop and disable the motors if the link is up, then close the port."""
-        if self._ser is not None and self.state in ("ready", "stopped"):
-            with self._lock:
-                self.sender.abort()
-                try:
-                    self._ser.write((self.sender.send_unnumbered("M410") + "\n").encode("ascii"))
-                except (serial.SerialException, OSError):
-                    pass
-                self.sender.enqueue("M18")
+        """Shutdown: quick-stop and disable the motors if the link is up, then close the port.
+
+        Runs after the executor stopped: the link's events are handled here until M18 is acknowledged.
+        """
+        if self._link_state() is LinkState.READY:
+            self.sender.abort()
+            self.link.write_line((self.sender.send_unnumbered("M410") + "\n").encode("ascii"))
+            self.sender.enqueue("M18")
             end = time.monotonic() + 1.0
             while time.monotonic() < end and (self.sender.queue_depth or self.sender.in_flight):
+                self._on_link_events()
                 time.sleep(0.02)
             self.get_logger().info("shutdown: M410 + M18 sent")
-        self._running = False
-        self._thread.join(1.0)
-        if self._ser is not None:
-            try:
-                self._ser.close()
-            except (serial.SerialException, OSError):
-                pass
+        self.link.stop()
 
 
 def main(args=None):

@@ -7,9 +7,9 @@ import time
 
 import pytest
 
-from frog_bridge.core.link import LinkState, LinkSupervisor
-from frog_bridge.core.pty_device import OpenedDevice, PtyDevice
-from frog_bridge.core.serial_link import SerialLink
+from soft_robot_common.link_state import LinkState, LinkSupervisor
+from soft_robot_common.pty_device import OpenedDevice, PtyDevice
+from soft_robot_common.serial_link import SerialLink
 
 
 def wait_for(pred, timeout=5.0):
@@ -102,3 +102,35 @@ def test_opened_device_mode():
     finally:
         os.close(controller)
         os.close(dev_fd)
+
+
+def test_snapshot_follows_the_line_the_latch_and_the_loss(device):
+    """What nodes read through snapshot(): lines, stall, the emergency latch above the connection, losses."""
+    sup = LinkSupervisor(reconnect_period_s=0.1, reconnect_max_period_s=0.2, settle_s=0.05, stall_timeout_s=0.2)
+    link = SerialLink(device.link_path, 115200, sup, lambda: None)
+    link.start()
+    try:
+        assert wait_for(lambda: link.connecting_since() is not None)
+        opened = link.connecting_since()
+        assert not link.settled(opened + 0.01) and link.settled(opened + 0.06)
+        link.ready(opened + 0.06)
+        snap = link.snapshot(opened + 0.1)
+        assert snap.state is LinkState.READY and snap.line_age is None and not snap.stalled
+        assert link.snapshot(opened + 0.3).stalled          # READY and silent for longer than 0.2 s
+        link.line_received(opened + 0.3)
+        snap = link.snapshot(opened + 0.4)
+        assert snap.line_age == pytest.approx(0.1) and not snap.stalled
+        assert link.emergency("Central: EMERGENCY") and not link.emergency("again")   # latched once
+        snap = link.snapshot()
+        assert snap.state is LinkState.EMERGENCY and snap.emergency_text == "again"
+        assert link.write_line(b"h 1 0\n") is None          # the latch is the node's to honour
+        assert read_device(device) == b"h 1 0\n"
+        assert link.snapshot().bytes_written == 6
+        assert link.clear_emergency() and not link.clear_emergency()
+        assert link.snapshot().state is LinkState.READY
+        device.unplug()
+        assert wait_for(lambda: link.snapshot().state is LinkState.DISCONNECTED)
+        snap = link.snapshot()
+        assert snap.losses == 1 and ("read failed" in snap.last_problem or "closed" in snap.last_problem)
+    finally:
+        link.stop()

@@ -1,11 +1,14 @@
 """The serial device in a thread of its own: open, read, reconnect with backoff, close.
 
+One design for every serial node (the frog's relay bridge, the finger's Marlin driver).
 :class:`SerialLink` owns the file descriptor: only its thread opens and closes the port
 (so no other thread can ever read a reused descriptor number). Other threads write whole
 lines with :meth:`SerialLink.write_line` and receive what happened through ``on_event``
-(called from the link thread; hand the work to your own thread, e.g. with a ROS guard
-condition). The link's state machine is a :class:`~frog_bridge.core.link.LinkSupervisor`
-guarded by :attr:`SerialLink.lock`. Times are ``time.monotonic()`` seconds.
+(called from the link thread); :meth:`SerialLink.for_node` wires that to a ROS guard
+condition, so the node's protocol logic runs in its executor. The link's state machine is a
+:class:`~soft_robot_common.link_state.LinkSupervisor`; nodes read it through
+:meth:`SerialLink.snapshot` and change it through the link's methods, which take
+:attr:`SerialLink.lock`. Times are ``time.monotonic()`` seconds.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from typing import Callable
 
 import serial
 
-from .link import LinkState, LinkSupervisor
+from .link_state import LinkState, LinkSupervisor
 
 
 @dataclass(frozen=True)
@@ -31,6 +34,20 @@ class LinkEvent:
     at: float
     data: bytes = b""
     text: str = ""
+
+
+@dataclass(frozen=True)
+class LinkSnapshot:
+    """The link's state at one instant, read under the lock (for decisions and diagnostics)."""
+
+    state: LinkState
+    stalled: bool
+    line_age: float | None     # seconds since the last line, None before the first
+    last_problem: str
+    losses: int
+    emergency_text: str
+    bytes_read: int
+    bytes_written: int
 
 
 class SerialLink:
@@ -68,8 +85,53 @@ class SerialLink:
         self.bytes_written = 0
         self._thread = threading.Thread(target=self._run, name="serial_link", daemon=True)
 
+    @classmethod
+    def for_node(cls, node, on_events: Callable[[], None], path: str, baud: int, supervisor: LinkSupervisor,
+                 write_timeout_s: float = 0.05) -> "SerialLink":
+        """A link whose events wake ``node``'s executor: ``on_events()`` runs there (call :meth:`events`)."""
+        wake = node.create_guard_condition(on_events)
+        link = cls(path, baud, supervisor, wake.trigger, write_timeout_s)
+        link.guard = wake          # the node owns it; keep it alive as long as the link
+        return link
+
     def start(self) -> None:
         self._thread.start()
+
+    # -- the state machine, under the lock ------------------------------------------------
+    def snapshot(self, now: float | None = None) -> LinkSnapshot:
+        now = time.monotonic() if now is None else now
+        with self.lock:
+            s = self.supervisor
+            return LinkSnapshot(s.state, s.stalled(now), s.line_age(now), s.last_problem, s.losses,
+                                s.emergency_text, self.bytes_read, self.bytes_written)
+
+    def settled(self, now: float) -> bool:
+        """Opened and settled: the node initialises the device, then calls :meth:`ready`."""
+        with self.lock:
+            return self.supervisor.settled(now)
+
+    def connecting_since(self) -> float | None:
+        """When the port opened while CONNECTING, else None."""
+        with self.lock:
+            s = self.supervisor
+            return s.opened_at if s.connection is LinkState.CONNECTING else None
+
+    def ready(self, now: float) -> None:
+        with self.lock:
+            self.supervisor.ready(now)
+
+    def line_received(self, at: float) -> None:
+        with self.lock:
+            self.supervisor.line_received(at)
+
+    def emergency(self, text: str) -> bool:
+        """Latch an emergency (nothing actuates); True if it was not latched before."""
+        with self.lock:
+            return self.supervisor.emergency(text)
+
+    def clear_emergency(self) -> bool:
+        with self.lock:
+            return self.supervisor.clear_emergency()
 
     # -- called from other threads ------------------------------------------------------
     def events(self) -> list[LinkEvent]:

@@ -1,4 +1,4 @@
-"""Supervision of the serial link to the relay: state machine, reconnect backoff, line age.
+"""Supervision of a serial link to a device: state machine, reconnect backoff, line age.
 
 States (:class:`LinkState`)::
 
@@ -10,9 +10,11 @@ States (:class:`LinkState`)::
     any state --emergency--> EMERGENCY (latched; reported above the connection state)
     EMERGENCY --clear_emergency--> the connection state underneath
 
-CONNECTING lasts ``settle_s`` after the port opened (the authors' code waits after opening
-before it writes ``p``; a dev-kit may reset when its USB port is opened). Only READY
-actuates. Times are seconds on a steady clock (the device runs in real time).
+CONNECTING lasts ``settle_s`` after the port opened (the frog authors' code waits after
+opening before it writes ``p``; a dev-kit or an Arduino resets when its USB port is opened
+and prints a banner), or until the node sees the device is up and calls ``ready``. Only
+READY actuates. EMERGENCY is the device's own stop (the relay's emergency line, Marlin's
+kill()). Times are seconds on a steady clock (the device runs in real time).
 """
 
 from __future__ import annotations

@@ -1,11 +1,14 @@
-"""A pseudo-terminal that stands in for the relay's USB serial device, with unplug/replug.
+"""A pseudo-terminal that stands in for a USB serial device, with unplug/replug.
 
-The controller side is ours; the device side is linked to a stable path (``link_path``)
-that the bridge opens like ``/dev/ttyACM0``. "Unplug" closes the pair and removes the link
-(the bridge's reads then fail with EIO, as when a USB device disappears); "replug" makes a
-new pair at the same path. Only the thread that calls :meth:`PtyDevice.wait_readable` /
-:meth:`PtyDevice.read` should call :meth:`unplug`/:meth:`plug`; writes may come from any
-thread (they hold :attr:`lock`).
+The one emulated device of every emulator (the frog's relay in ``robot_emulator``, the
+finger's Marlin board in ``marlin_emulator``). The controller side is ours; the device side is
+linked to a stable path (``link_path``) that the host node opens like ``/dev/ttyACM0``.
+"Unplug" closes the pair and removes the link (the host's reads then fail with EIO, as when
+a USB device disappears); "replug" makes a new pair at the same path. The emulator's reading
+thread selects on :attr:`PtyDevice.controller` and calls :meth:`PtyDevice.read`; where an
+unplug can come from another thread (``marlin_emulator``'s ``~/unplug``), the reader takes an
+``OSError`` or ``ValueError`` there as no data. Writes may come from any thread (they hold
+:attr:`lock`).
 """
 
 from __future__ import annotations
