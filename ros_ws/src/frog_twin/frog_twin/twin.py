@@ -60,6 +60,7 @@ from pathlib import Path
 from frog_planner.core.settings import PathSettings, PlannerSettings, add_arguments, from_arguments
 from frog_vision.core.state_filter import FilterSettings
 from soft_robot_common.graph import GraphError, load_graph
+from soft_robot_common.graph_watch import GraphWatch
 from soft_robot_common.processes import NodeProcess, acquire_domain
 from soft_robot_common.supervision import RestartPolicy, Supervisor
 
@@ -148,29 +149,26 @@ def _library_model_differs(path: Path) -> str:
     return ""
 
 
-class PlannerWatch:
-    """An rclpy node on the run's domain: starts the planner and follows its status."""
+class PlannerWatch(GraphWatch):
+    """The run's graph watch: starts the planner and follows its status and the odometry."""
 
     def __init__(self, domain):
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
+        from nav_msgs.msg import Odometry
         from soft_robot_interfaces.msg import PlannerStatus
         from std_srvs.srv import Trigger
-        self._rclpy, self.Trigger, self.Status = rclpy, Trigger, PlannerStatus
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain.domain_id)
-        self.node = rclpy.create_node("twin_watch", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        super().__init__(domain, "twin_watch")
+        self.Trigger, self.Status = Trigger, PlannerStatus
         self.last = None
-        self.node.create_subscription(PlannerStatus, "/frog/planner/status", self._on_status, 10)
-        from nav_msgs.msg import Odometry
         self.odom_count = 0
+        self.node.create_subscription(PlannerStatus, "/frog/planner/status", self._on_status, 10)
         self.node.create_subscription(Odometry, "/frog/odom", self._on_odom, 10)
         self.start_client = self.node.create_client(Trigger, "/planner_node/start")
 
     def _on_status(self, msg) -> None:
         self.last = msg
+
+    def _on_odom(self, msg) -> None:
+        self.odom_count += 1
 
     def publish_stop(self) -> None:
         """The run's one stop (frog/stop): the planner stops deciding, the bridge cancels every pulse."""
@@ -180,34 +178,15 @@ class PlannerWatch:
             self.spin(0.3)
         self.stop_pub.publish(Empty())
 
-    def _on_odom(self, msg) -> None:
-        self.odom_count += 1
-
     def spin(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=max(0.0, min(0.05, end - time.monotonic())))
+        self.spin_for(seconds)
 
     def wait(self, predicate, timeout: float, what: str, procs=()) -> None:
-        end = time.monotonic() + timeout
-        while not predicate():
-            if time.monotonic() > end:
-                raise TimeoutError(f"{what} within {timeout:.0f} s")
-            for p in procs:
-                if not p.running():
-                    raise RuntimeError(f"{p.name} exited early:\n{p.log_text()[-3000:]}")
-            self.spin(0.1)
-
-    def subscribed(self, node_name: str, topics) -> bool:
-        """Whether node ``node_name`` subscribes to every topic of ``topics`` (graph discovery)."""
-        return all(any(info.node_name == node_name for info in self.node.get_subscriptions_info_by_topic(t))
-                   for t in topics)
+        self.spin_until(predicate, timeout, what, procs)
 
     def start_planner(self) -> str:
         self.wait(self.start_client.service_is_ready, 60, "planner_node/start service")
-        future = self.start_client.call_async(self.Trigger.Request())
-        self.wait(future.done, 30, "reply of planner_node/start")
-        reply = future.result()
+        reply = self.call(self.start_client, self.Trigger.Request(), timeout=30)
         if not reply.success:
             raise RuntimeError(f"planner_node refused to start: {reply.message}")
         return reply.message
@@ -215,11 +194,6 @@ class PlannerWatch:
     @property
     def state(self):
         return None if self.last is None else self.last.state
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self._rclpy.shutdown(context=self.context)
 
 
 #: The frog's node graph (package data; also installed as share/frog_twin/config/frog_graph.yaml).

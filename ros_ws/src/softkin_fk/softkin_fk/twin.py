@@ -57,19 +57,15 @@ def _stamp(msg) -> float:
 
 def run_curves(args, env) -> dict:
     """Send each curve to the action server; collect feedback, results, setpoints and move ends."""
-    import rclpy
     from rclpy.action import ActionClient
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
+    from soft_robot_common.graph_watch import GraphWatch
     from soft_robot_interfaces.action import FollowCurve
     from tqdm import tqdm
 
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=int(env["ROS_DOMAIN_ID"]))
-    node = rclpy.create_node("softkin_twin", context=ctx)
-    from rclpy.executors import SingleThreadedExecutor
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
+    watch = GraphWatch(int(env["ROS_DOMAIN_ID"]), "softkin_twin")
+    node, spin_until = watch.node, watch.spin_until
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     setpoints, ends, motor = [], [], []
     node.create_subscription(JointState, "/finger/tendon_setpoints", setpoints.append, qos)
@@ -77,20 +73,12 @@ def run_curves(args, env) -> dict:
     node.create_subscription(JointState, "/finger/emulator/motor_state", motor.append, qos)
     client = ActionClient(node, FollowCurve, "/finger/follow_curve")
 
-    def spin_until(pred, timeout, what):
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if pred():
-                return
-            ex.spin_once(timeout_sec=0.05)
-        raise RuntimeError(f"timed out after {timeout} s waiting for {what}")
-
     out = {}
     try:
         spin_until(client.server_is_ready, 120, "the follow_curve action server")
         spin_until(lambda: node.count_publishers("/finger/emulator/move_end") >= (0 if args.port else 1)
                    and node.count_subscribers("/finger/tendon_setpoints") >= 2, 60, "driver and emulator")
-        ex.spin_once(timeout_sec=0.5)
+        watch.spin_for(0.5)
         for curve in args.curves:
             n0_sp, n0_end = len(setpoints), len(ends)
             feedback = []
@@ -130,9 +118,7 @@ def run_curves(args, env) -> dict:
                 move_end_stamps=np.array([_stamp(m) for m in ends[n0_end:]]))
     finally:
         client.destroy()
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
+        watch.close()
     return out
 
 
