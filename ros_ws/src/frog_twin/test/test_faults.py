@@ -162,3 +162,15 @@ def test_arrival_order_attributes_a_firing_stamped_well_before_its_decision():
     # a firing that really arrives after a long silence of the planner is still stale
     late = Observed(odom=obs.odom, decisions=[(14.3, "B")], fired=[14.3, 18.34], decision_seq=[1], fired_seq=[2, 3])
     assert [b["fired"] for b in stale_firings(late, [], 3.0, 0.7)] == [18.34]
+
+
+def test_a_firing_taken_off_the_queue_before_its_decision_is_still_that_decision_s():
+    """A CI run: the observer handled the bridge's sent (15.754) before the planner's primitive
+    (15.734) that caused it, both ready in one wait set; by arrival alone the firing was the
+    1.45 s old decision's. The newer of the stamp and the arrival readings is its cause."""
+    obs = Observed(odom=[i / 30 for i in range(900)], decisions=[(14.3, "E"), (15.734, "E")],
+                   fired=[14.3, 15.754, 15.838], decision_seq=[1, 4], fired_seq=[2, 3, 5])
+    assert stale_firings(obs, [], 3.0, 0.7) == []
+    # a command really fired long after its decision is still caught, whatever the order
+    old = Observed(odom=obs.odom, decisions=[(14.3, "E")], fired=[14.3, 15.754], decision_seq=[1], fired_seq=[2, 3])
+    assert [b["fired"] for b in stale_firings(old, [], 3.0, 0.7)] == [15.754]

@@ -228,6 +228,7 @@ def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float
     not matched yet); an old-command verdict inside one is ``unverified``, not stale.
     """
     odom = sorted(obs.odom)
+    stamps = sorted(t for t, n in obs.decisions if n != "I")
     by_arrival = len(obs.decision_seq) == len(obs.decisions) and len(obs.fired_seq) == len(obs.fired) \
         and obs.decision_seq
     if by_arrival:
@@ -235,16 +236,24 @@ def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float
         d_keys, d_stamps = [q for q, _ in kicks], [t for _, t in kicks]
         firings = sorted(zip(obs.fired_seq, obs.fired))
     else:
-        kicks = sorted(t for t, n in obs.decisions if n != "I")
-        d_keys = d_stamps = [t + 0.0 for t in kicks]
-        firings = [(t + CLOCK_SKEW_S, t) for t in sorted(obs.fired)]
+        firings = [(None, t) for t in sorted(obs.fired)]
     bad = []
     for key, t in firings:
-        i = bisect.bisect_right(d_keys, key) - 1
-        if i < 0:
+        # the newer of two readings: by stamps (the robot's clock may trail the planner's by
+        # CLOCK_SKEW_S) and by arrival (the observer may take a firing off its queue before
+        # the decision that caused it: two topics, two publishers, one wait set)
+        candidates = []
+        i = bisect.bisect_right(stamps, t + CLOCK_SKEW_S) - 1
+        if i >= 0:
+            candidates.append(stamps[i])
+        if key is not None:
+            i = bisect.bisect_right(d_keys, key) - 1
+            if i >= 0:
+                candidates.append(d_stamps[i])
+        if not candidates:
             bad.append({"fired": t, "why": "no primitive was decided before it"})
             continue
-        t_d = d_stamps[i]
+        t_d = max(candidates)
         j = bisect.bisect_right(odom, t_d + 1e-6) - 1
         if j < 0:
             bad.append({"fired": t, "decided": t_d, "why": "decided before any odometry"})
