@@ -26,6 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 from ros_harness import NodeProcess, acquire_domain, open_pty_pair, ros_args  # noqa: E402
+from soft_robot_common.graph_watch import GraphWatch  # noqa: E402
 
 
 def cpu_seconds(pid: int) -> float:
@@ -38,17 +39,14 @@ def percentile(xs, q):
     return xs[min(len(xs) - 1, int(round(q / 100 * (len(xs) - 1))))]
 
 
-class Probe:
+class Probe(GraphWatch):
+    """The bench's graph watch, spun by a thread of its own: the Imu callback stamps arrivals."""
+
     def __init__(self, domain_id, namespaces):
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import Imu
         from soft_robot_interfaces.msg import Primitive
-        self.rclpy = rclpy
-        self.ctx = rclpy.Context()
-        rclpy.init(context=self.ctx, domain_id=domain_id)
-        self.node = rclpy.create_node("bench_probe", context=self.ctx)
+        super().__init__(domain_id, "bench_probe")
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.Primitive = Primitive
         self.namespaces = namespaces
@@ -57,16 +55,14 @@ class Probe:
         self.imu_event = {ns: threading.Event() for ns in namespaces}
         for ns in namespaces:
             self.node.create_subscription(Imu, f"{ns}/frog/imu", lambda m, ns=ns: self._on_imu(ns), qos)
-        self.ex = SingleThreadedExecutor(context=self.ctx)
-        self.ex.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
 
     def _spin(self):
         from rclpy.executors import ExternalShutdownException
         try:
-            while self.ctx.ok():
-                self.ex.spin_once(timeout_sec=0.1)
+            while self.context.ok():
+                self.executor.spin_once(timeout_sec=0.1)
         except ExternalShutdownException:
             pass
 
@@ -89,7 +85,7 @@ class Probe:
         return m
 
     def close(self):
-        self.rclpy.shutdown(context=self.ctx)
+        self._rclpy.shutdown(context=self.context)
         self.thread.join(2)
 
 

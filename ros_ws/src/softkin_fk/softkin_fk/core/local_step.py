@@ -369,6 +369,13 @@ def _element_target(i, x, elements, rest_centred, kind, ratios, passive, shape_p
     energy[i] = coef[i] * e
 
 
+@nb.njit(cache=True)
+def _target_scratch(k):
+    """Scratch of :func:`_element_target` for elements of ``k`` vertices: X, T, dT (k, 3); M, S, V, R (3, 3)."""
+    return (np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3)), np.empty((3, 3)), np.empty((3, 3)),
+            np.empty((3, 3)), np.empty((3, 3)))
+
+
 @nb.njit(parallel=True)  # not cached: numba cannot cache this parallel kernel
 def _local_targets_parallel(x, elements, rest_centred, kind, ratios, passive, shape_parameter,
                             rest_volume, coef, targets, energy):
@@ -376,13 +383,7 @@ def _local_targets_parallel(x, elements, rest_centred, kind, ratios, passive, sh
     nth = nb.get_num_threads()
     chunk = (n + nth - 1) // nth
     for t in nb.prange(nth):
-        X = np.empty((k, 3))
-        T = np.empty((k, 3))
-        dT = np.empty((k, 3))
-        M = np.empty((3, 3))
-        S = np.empty((3, 3))
-        V = np.empty((3, 3))
-        R = np.empty((3, 3))
+        X, T, dT, M, S, V, R = _target_scratch(k)     # one set per thread
         for i in range(t * chunk, min(n, (t + 1) * chunk)):
             _element_target(i, x, elements, rest_centred, kind, ratios, passive, shape_parameter,
                             rest_volume, coef, targets, energy, X, T, dT, M, S, V, R)
@@ -392,13 +393,7 @@ def _local_targets_parallel(x, elements, rest_centred, kind, ratios, passive, sh
 def _local_targets_serial(x, elements, rest_centred, kind, ratios, passive, shape_parameter,
                           rest_volume, coef, targets, energy):
     n, k = elements.shape
-    X = np.empty((k, 3))
-    T = np.empty((k, 3))
-    dT = np.empty((k, 3))
-    M = np.empty((3, 3))
-    S = np.empty((3, 3))
-    V = np.empty((3, 3))
-    R = np.empty((3, 3))
+    X, T, dT, M, S, V, R = _target_scratch(k)
     for i in range(n):
         _element_target(i, x, elements, rest_centred, kind, ratios, passive, shape_parameter,
                         rest_volume, coef, targets, energy, X, T, dT, M, S, V, R)
