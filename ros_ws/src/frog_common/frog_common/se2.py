@@ -73,6 +73,8 @@ def twist_arc(pose, twist, dt) -> np.ndarray:
     p = np.asarray(pose, dtype=float)
     v = np.asarray(twist, dtype=float)
     dt = np.asarray(dt, dtype=float)
+    if p.ndim == 1 and v.ndim == 1 and dt.ndim == 0:
+        return _twist_arc_one(*p.tolist(), *v.tolist(), float(dt))
     a = v[..., 2] * dt
     small = np.abs(a) < 1e-6
     a_safe = np.where(small, 1.0, a)
@@ -82,3 +84,15 @@ def twist_arc(pose, twist, dt) -> np.ndarray:
     d_body = np.stack([dt * (sa * v[..., 0] - ca * v[..., 1]), dt * (ca * v[..., 0] + sa * v[..., 1])], axis=-1)
     d = body_to_world(p[..., 2], d_body)
     return np.concatenate([p[..., :2] + d, (p[..., 2] + a)[..., None]], axis=-1)
+
+
+def _twist_arc_one(x, y, th, u, w, r, dt) -> np.ndarray:
+    """:func:`twist_arc` of one pose in scalar math (the pose filter's Jacobian calls it 7 times a frame)."""
+    a = r * dt
+    if abs(a) < 1e-6:
+        sa, ca = 1.0 - a * a / 6.0, a / 2.0
+    else:
+        sa, ca = math.sin(a) / a, (1.0 - math.cos(a)) / a
+    bx, by = dt * (sa * u - ca * w), dt * (ca * u + sa * w)
+    c, s = math.cos(th), math.sin(th)
+    return np.array([x + c * bx - s * by, y + s * bx + c * by, th + a])
