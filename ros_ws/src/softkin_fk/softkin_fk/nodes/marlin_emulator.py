@@ -32,17 +32,13 @@ from std_srvs.srv import Trigger
 
 from ..core.marlin_board import MarlinBoard
 from ..core.stepper import CableMotorMap
+from .motor_params import DEFAULT_PORT_LINK, MOTOR_PARAMS
 
 PARAMS = [
-    Param("port_link", "/tmp/softkin_marlin", "path of a symlink to the emulated board's serial device; default "
+    Param("port_link", DEFAULT_PORT_LINK, "path of a symlink to the emulated board's serial device; default "
           "/tmp/softkin_marlin in the root namespace, /tmp/softkin_marlin_<ns> in /<ns>; refused if another live "
           "emulator holds it"),
-    Param("joints", ["cable_0", "cable_1", "cable_2"], "cable (joint) names, one per axis"),
-    Param("axes", ["X", "Y", "Z"], "Marlin axis letter of each cable"),
-    Param("pulley_radius", 0.005, "radius the cables wind on [m]", min=1e-4, max=0.1),
-    Param("steps_per_rev", 200, "full steps per motor revolution", min=1, max=10000),
-    Param("microsteps", 16, "driver microstepping", min=1, max=256),
-    Param("steps_per_unit", 80.0, "board microsteps per axis unit (M92)", min=1e-3, max=5000.0),
+    *MOTOR_PARAMS,
     Param("buffer_size", 16, "planner moves held at once (Marlin BLOCK_BUFFER_SIZE)", min=1, max=64),
     Param("publish_rate", 50.0, "rate of finger/emulator/motor_state [Hz]", min=1.0, max=500.0),
     Param("transcript", "", "file to append every received line to (with a time stamp); empty = none"),

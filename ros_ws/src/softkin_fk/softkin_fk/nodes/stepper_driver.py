@@ -40,17 +40,13 @@ from std_srvs.srv import Trigger
 
 from ..core.marlin import GcodeSender, format_axes, parse_reply
 from ..core.stepper import CableMotorMap
+from .motor_params import DEFAULT_PORT_LINK, MOTOR_PARAMS
 
 PARAMS = [
-    Param("port", "/tmp/softkin_marlin", "serial device of the Marlin board (e.g. /dev/ttyACM0); default "
+    Param("port", DEFAULT_PORT_LINK, "serial device of the Marlin board (e.g. /dev/ttyACM0); default "
           "marlin_emulator's link in this namespace: /tmp/softkin_marlin in /, /tmp/softkin_marlin_<ns> in /<ns>"),
     Param("baud", 115200, "serial baud rate", min=1200, max=4000000),
-    Param("joints", ["cable_0", "cable_1", "cable_2"], "cable (joint) names of the setpoints, one per axis"),
-    Param("axes", ["X", "Y", "Z"], "Marlin axis letter of each cable"),
-    Param("pulley_radius", 0.005, "radius the cables wind on [m]", min=1e-4, max=0.1),
-    Param("steps_per_rev", 200, "full steps per motor revolution (1.8 deg motors: 200)", min=1, max=10000),
-    Param("microsteps", 16, "driver microstepping (RAMPS A4988, all jumpers: 16)", min=1, max=256),
-    Param("steps_per_unit", 80.0, "the board's microsteps per axis unit (its M92 setting)", min=1e-3, max=5000.0),
+    *MOTOR_PARAMS,
     Param("min_pull", 0.0, "soft limit: smallest cable pull [m] (below it the cable is pushed slack)",
           min=-0.1, max=0.1),
     Param("max_pull", 0.0085, "soft limit: largest cable pull [m] (built-in finger: 0.85 of its two 5 mm slots)",
