@@ -166,6 +166,18 @@ def test_pooled_ratios_over_runs_and_seeds():
     assert p["mean_distance_ratio_twin_over_real"] == pytest.approx(0.06 / 0.07)
     assert p["lateral_runs"] == ["a", "b"]
     assert p["signed_lateral_ratio_twin_over_real"] == pytest.approx((0.01 + 0.015) / (0.02 + 0.03))
+    assert p["signed_lateral_ratio_se"] is None          # run b has one seed: no spread known
+    assert p["mean_distance_ratio_se"] is None
+    results[1]["twins"].append(_m(0.02, -0.025))
+    # a: seeds 0.008, 0.012 -> s^2 = 8e-6, /2; b: -0.015, -0.025 -> s^2 = 5e-5, /2
+    assert replay.pooled(results)["signed_lateral_ratio_se"] == pytest.approx(math.sqrt(4e-6 + 2.5e-5) / 0.05)
+    results[2]["twins"].append(_m(0.02, -0.02))
+    # distances a: 0.008, 0.012 (s^2 8e-6); b: 0.02, 0.02 (0); c: 0.03, 0.02 (5e-5); real sum 0.07
+    assert replay.pooled(results)["mean_distance_ratio_se"] == pytest.approx(math.sqrt(4e-6 + 2.5e-5) / 0.07)
+    results[2]["twins"].pop()
+    assert "+- 0.11 (se, seed spread)" in replay.format_summary(
+        replay.summary_rows([dict(r, setup={"period_s": 1.43}) for r in results]), replay.pooled(results))
+    results[1]["twins"].pop()
     # the twin on the other side of the path gives a negative ratio
     results[1]["twins"] = [_m(0.02, +0.03)]
     assert replay.pooled(results)["signed_lateral_ratio_twin_over_real"] == pytest.approx((0.01 - 0.03) / 0.05)

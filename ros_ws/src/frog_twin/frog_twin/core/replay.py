@@ -285,9 +285,13 @@ def pooled(results: list[dict], min_real_offset: float = POOL_MIN_REAL_OFFSET_M)
 
     - mean distance: (mean over runs of the seed-mean twin distance) / (mean over runs of the
       real distance); every run weighs the same, whatever its number of seeds;
+      ``mean_distance_ratio_se`` is its standard error from the seed spread, as below;
     - signed lateral offset: over the runs whose real |signed mean lateral offset| exceeds
       ``min_real_offset``, sum of (seed-mean twin offset x sign of the real one) / sum of
       |real offset|: 1 = the twin is off to the same side by as much; < 0 = the other side.
+      ``signed_lateral_ratio_se`` is its standard error from the twin's seed-to-seed spread,
+      sqrt(sum of s_i^2 / n_i) / sum of |real offset| (s_i the sample sd over run i's n_i seeds;
+      None below 2 seeds a run): the robot ran each path once, so that is all the spread known.
     """
     real_d = [r["real"]["mean_distance_m"] for r in results]
     twin_d = [float(np.mean([t["mean_distance_m"] for t in r["twins"]])) for r in results]
@@ -295,12 +299,23 @@ def pooled(results: list[dict], min_real_offset: float = POOL_MIN_REAL_OFFSET_M)
     num = sum(float(np.mean([t["mean_signed_lateral_m"] for t in r["twins"]]))
               * math.copysign(1.0, r["real"]["mean_signed_lateral_m"]) for r in sel)
     den = sum(abs(r["real"]["mean_signed_lateral_m"]) for r in sel)
+    se = _ratio_se([[t["mean_signed_lateral_m"] for t in r["twins"]] for r in sel], den)
+    se_d = _ratio_se([[t["mean_distance_m"] for t in r["twins"]] for r in results], float(np.sum(real_d)))
     return {"runs": len(results), "seeds_per_run": [len(r["twins"]) for r in results],
             "mean_distance_real_m": float(np.mean(real_d)) if real_d else None,
             "mean_distance_twin_m": float(np.mean(twin_d)) if twin_d else None,
             "mean_distance_ratio_twin_over_real": float(np.sum(twin_d) / np.sum(real_d)) if real_d else None,
+            "mean_distance_ratio_se": se_d,
             "lateral_runs": [r["run"] for r in sel], "lateral_min_real_offset_m": min_real_offset,
-            "signed_lateral_ratio_twin_over_real": num / den if den > 0 else None}
+            "signed_lateral_ratio_twin_over_real": num / den if den > 0 else None,
+            "signed_lateral_ratio_se": se}
+
+
+def _ratio_se(seeds: list[list[float]], den: float) -> float | None:
+    """Standard error of sum_i mean(seeds_i) / den from the seeds' sample spread."""
+    if den <= 0 or not seeds or any(len(s) < 2 for s in seeds):
+        return None
+    return math.sqrt(sum(float(np.var(s, ddof=1)) / len(s) for s in seeds)) / den
 
 
 def summary_rows(results: list[dict]) -> list[dict]:
@@ -368,8 +383,13 @@ def format_summary(rows: list[dict], pool: dict) -> str:
     ratio = pool["mean_distance_ratio_twin_over_real"]
     lat = pool["signed_lateral_ratio_twin_over_real"]
     out.append(f"{'pooled':8s} mean distance real {_fmt(pool['mean_distance_real_m'], 100, '.2f')} cm, "
-               f"twin {_fmt(pool['mean_distance_twin_m'], 100, '.2f')} cm, twin/real {_fmt(ratio, 1, '.2f')}; "
-               f"signed lateral offset twin/real {_fmt(lat, 1, '.2f')} over "
+               f"twin {_fmt(pool['mean_distance_twin_m'], 100, '.2f')} cm, twin/real {_fmt(ratio, 1, '.2f')}"
+               + (f" +- {pool['mean_distance_ratio_se']:.2f}" if pool.get("mean_distance_ratio_se") is not None else "")
+               + "; "
+               f"signed lateral offset twin/real {_fmt(lat, 1, '.2f')}"
+               + (f" +- {pool['signed_lateral_ratio_se']:.2f} (se, seed spread)"
+                  if pool.get("signed_lateral_ratio_se") is not None else "")
+               + " over "
                f"{', '.join(pool['lateral_runs']) or 'no run'} (real |offset| > "
                f"{100 * pool['lateral_min_real_offset_m']:.0f} cm)")
     return "\n".join(out)
