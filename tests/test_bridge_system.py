@@ -36,6 +36,15 @@ def h_lines(rows, after=0.0):
     return [(t, line) for t, line, _ in rows if t > after and line.startswith("h")]
 
 
+def wait_h_lines(log, count, after=0.0, timeout=5.0, probe=None):
+    """The emulator's wire log once it holds ``count`` h lines after ``after`` (or at the deadline;
+    the caller's assert then names what is missing). ``probe`` is spun meanwhile, if given."""
+    end = time.monotonic() + timeout
+    while len(lines := h_lines(read_log(log), after=after)) < count and time.monotonic() < end:
+        probe.spin_for(0.005) if probe is not None else time.sleep(0.005)
+    return lines
+
+
 class Diag:
     """Latest bridge_node diagnostics values."""
 
@@ -94,11 +103,13 @@ def test_each_primitive_becomes_the_firmware_lines_in_order_and_time(launch, pro
     publish_primitive(probe, pub, "I")              # warm-up: the first sample pays for DDS matching
     probe.spin_for(0.5)
     marks = {}
-    for name in NAMES:                               # 0.85 s apart: above min_limb_interval_s 0.8
+    for name in NAMES:
         marks[name] = time.time()
         publish_primitive(probe, pub, name)
-        probe.spin_for(0.85)
-    probe.spin_for(0.3)
+        lines = wait_h_lines(log, len(EXPECTED[name]), after=marks[name], probe=probe)
+        # the next one 0.85 s after this one's last line reached the wire (sent before that):
+        # above min_limb_interval_s 0.8 however late the bridge ran
+        probe.spin_for(max(0.0, (lines[-1][0] if lines else marks[name]) + 0.85 - time.time()))
     rows = read_log(log)
     assert [line for _, line, _ in rows if line.startswith("p")] == ["p 80"]
     got = {}
@@ -184,16 +195,17 @@ def test_emergency_latches_until_cleared_and_protection_refuses(launch, probe, t
     for name in ("B", "A", "G"):
         publish_primitive(probe, pub, name)
         probe.spin_for(0.9)
-    assert h_lines(read_log(log), after=t_emergency) == []
+    # all three taken and refused, so none can still reach the wire
     probe.spin_until(lambda: diag.values.get("refused_emergency") == "3", 5, "3 refusals in emergency")
+    assert h_lines(read_log(log), after=t_emergency) == []
 
     r = trigger(probe, "/bridge_node/clear_emergency")
     assert r.success and "cleared" in r.message
     probe.spin_for(0.2)
     t_clear = time.time()
     publish_primitive(probe, pub, "B")
-    probe.spin_for(0.5)
-    assert [line for _, line in h_lines(read_log(log), after=t_clear)] == ["h 1 0", "h 2 3"]
+    fired_b = wait_h_lines(log, 2, after=t_clear, probe=probe)
+    assert [line for _, line in fired_b] == ["h 1 0", "h 2 3"]
     assert trigger(probe, "/bridge_node/clear_emergency").message.startswith("no emergency")
 
     # direct limb commands from tools (frog/limb_command): sent as one line; a pulse length
@@ -202,12 +214,12 @@ def test_emergency_latches_until_cleared_and_protection_refuses(launch, probe, t
     limb_pub = probe.node.create_publisher(LimbActivation, "/frog/limb_command", QOS)
     probe.wait_for_subscriber("/frog/limb_command")
     probe.spin_for(0.5)
+    probe.spin_for(max(0.0, fired_b[-1][0] + 0.85 - time.time()))    # past the limbs' 0.8 s interval
     t_cmd = time.time()
     limb_pub.publish(LimbActivation(limbs=[3, 0], pulse_duration=0.2))
     bridge.wait_for_log("pulse_duration 0.2 s differs", timeout=5)
     limb_pub.publish(LimbActivation(limbs=[3, 0], pulse_duration=0.0))
-    probe.spin_for(0.3)
-    assert [line for _, line in h_lines(read_log(log), after=t_cmd)] == ["h 3 0"]
+    assert [line for _, line in wait_h_lines(log, 1, after=t_cmd, probe=probe)] == ["h 3 0"]
     assert emu.stop() == 0 and bridge.stop() == 0
 
 
@@ -265,8 +277,7 @@ def test_unplug_replug_reconnects_without_stale_commands_and_stall_is_reported(l
     assert after == [("p 80", "pulse 80 ms")], after      # no burst of the three refused primitives
     t_new = time.time()
     publish_primitive(probe, pub, "A")
-    probe.spin_for(0.4)
-    assert [line for _, line in h_lines(read_log(log), after=t_new)] == ["h 1 0"]
+    assert [line for _, line in wait_h_lines(log, 1, after=t_new, probe=probe)] == ["h 1 0"]
 
     # garbage from the relay (binary, non-UTF-8, 10 kB lines, partial lines): counted, harmless
     imu = []
@@ -291,8 +302,7 @@ def test_unplug_replug_reconnects_without_stale_commands_and_stall_is_reported(l
     probe.spin_for(0.3)
     t_alive = time.time()
     publish_primitive(probe, pub, "B")
-    probe.spin_for(0.4)
-    assert [line for _, line in h_lines(read_log(log), after=t_new)] == ["h 1 0", "h 1 0", "h 2 3"]
+    assert [line for _, line in wait_h_lines(log, 3, after=t_new, probe=probe)] == ["h 1 0", "h 1 0", "h 2 3"]
     assert all(t > t_alive for t, _ in h_lines(read_log(log), after=t_new)[1:])
     assert emu.stop() == 0 and bridge.stop() == 0
 
@@ -444,9 +454,7 @@ def test_shutdown_between_front_and_rear_sends_no_rear(launch, probe, tmp_path):
     probe.wait_for_subscriber("/frog/primitive")
     probe.spin_for(1.0)
     publish_primitive(probe, pub, "B")
-    end = time.monotonic() + 3
-    while not h_lines(read_log(log)) and time.monotonic() < end:
-        time.sleep(0.005)
+    wait_h_lines(log, 1, timeout=3)
     assert bridge.stop() == 0 and bridge.stopped_cleanly
     assert "shutdown: 1 pending pulse(s) cancelled" in bridge.log_text()
     time.sleep(0.5)
@@ -466,9 +474,7 @@ def test_frog_stop_cancels_the_pending_pulse_and_latches_until_cleared(launch, p
     probe.wait_for_subscriber("/frog/stop")
     probe.spin_for(1.0)
     publish_primitive(probe, pub, "B")          # front now, rear 300 ms later
-    end = time.monotonic() + 3
-    while not h_lines(read_log(log)) and time.monotonic() < end:
-        time.sleep(0.005)
+    wait_h_lines(log, 1, timeout=3)
     stop.publish(Empty())
     bridge.wait_for_log(r"stop received on /frog/stop: 1 pending pulse\(s\) cancelled", timeout=5)
     time.sleep(0.6)
@@ -480,10 +486,7 @@ def test_frog_stop_cancels_the_pending_pulse_and_latches_until_cleared(launch, p
     t_clear = time.time()
     probe.spin_for(0.5)
     publish_primitive(probe, pub, "A")
-    end = time.monotonic() + 5
-    while not h_lines(read_log(log), after=t_clear) and time.monotonic() < end:
-        time.sleep(0.01)
-    assert [line for _, line in h_lines(read_log(log), after=t_clear)] == ["h 1 0"]
+    assert [line for _, line in wait_h_lines(log, 1, after=t_clear)] == ["h 1 0"]
     assert bridge.stop() == 0 and emu.stop() == 0
 
 
@@ -630,11 +633,11 @@ def test_cli_sends_primitives_and_limb_commands(launch, probe, tmp_path):
     t0 = time.time()
     cli = launch("frog-bridge", "primitive", "C")
     assert cli.wait(30) == 0 and "sent primitive C on /frog/primitive" in cli.log_text()
-    time.sleep(0.9)
+    assert [line for _, line in wait_h_lines(log, 2, after=t0)] == ["h 0", "h 2 3"]
+    time.sleep(0.9)             # past the limbs' 0.8 s interval, counted from the wire (after the send)
     cli = launch("frog-bridge", "limbs", "FR", "br")
     assert cli.wait(30) == 0
-    time.sleep(0.3)
-    assert [line for _, line in h_lines(read_log(log), after=t0)] == ["h 0", "h 2 3", "h 1 3"]
+    assert [line for _, line in wait_h_lines(log, 3, after=t0)] == ["h 0", "h 2 3", "h 1 3"]
     for bad in (["primitive", "Z"], ["limbs", "XX"], ["limbs", "FL", "0"]):
         cli = launch("frog-bridge", *bad)
         assert cli.wait(30) == 2, bad

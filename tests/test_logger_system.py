@@ -25,6 +25,21 @@ def _decoded(path, topic="/odom"):
         return [(m.log_time, d) for _, _, m, d in reader.iter_decoded_messages(topics=[topic])]
 
 
+def _wait_recorded(probe, count, timeout=60.0):
+    """Wait until the recorder's diagnostics count ``count`` messages: it may still be taking
+    a loaded machine's queue after the publisher is done, and a stop before that loses them.
+    A recorder that lost some never gets there: then the file's own count is the failure."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    def enough(msg):
+        return any(kv.key == "messages" and int(kv.value) >= count
+                   for st in msg.status if st.name.startswith("recorder") for kv in st.values)
+    try:
+        probe.wait_heard(DiagnosticArray, "/diagnostics", timeout=timeout, accept=enough)
+    except TimeoutError:
+        pass
+
+
 def _assert_content(decoded_msg, seq):
     for key, want in odom_fields(seq).items():
         got = read_field(decoded_msg, key)
@@ -41,7 +56,7 @@ def test_records_every_message_at_1khz_for_10s(launch, probe, tmp_path):
     probe.wait_for_node("/recorder", timeout=20)
     pub = launch("odom_publisher.py", "--rate", "1000", "--count", "10000")
     pub.wait_for_log(r"done 10000 messages", timeout=60)
-    time.sleep(1.0)
+    _wait_recorded(probe, 10000)
     assert rec.stop() == 0 and rec.stopped_cleanly, rec.log_text()[-2000:]
 
     files = sorted(out.glob("odom_*.mcap"))
@@ -149,7 +164,7 @@ def test_split_by_duration_keeps_every_message_once(launch, probe, tmp_path):
     probe.wait_for_node("/recorder", timeout=20)
     pub = launch("odom_publisher.py", "--rate", "500", "--count", "1750")
     pub.wait_for_log("done 1750", timeout=60)
-    time.sleep(1.0)
+    _wait_recorded(probe, 1750)
     assert rec.stop() == 0
     files = sorted(out.glob("split_*.mcap"))
     assert len(files) >= 3
@@ -166,7 +181,7 @@ def test_export_csv_round_trip(launch, probe, tmp_path):
                                      "topics": ["/odom"]})
     probe.wait_for_node("/recorder", timeout=20)
     launch("odom_publisher.py", "--rate", "100", "--count", "50").wait_for_log("done", 30)
-    time.sleep(0.5)
+    _wait_recorded(probe, 50)
     rec.stop()
     cli = launch("frog-log", "export", str(out / "x_000.mcap"), "-o", str(tmp_path / "csv"))
     assert cli.wait(60) == 0, cli.log_text()
