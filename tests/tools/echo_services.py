@@ -6,9 +6,11 @@ iterations = max_iterations + 1, success = True, message = "echo".
 ForwardKinematics: marker_points[i] = (a_i, 2 a_i, -a_i), tip = last point, success = True.
 """
 
-import rclpy
+import sys
+
 from geometry_msgs.msg import Point
-from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from soft_robot_common.node_main import run_node
 from soft_robot_interfaces.srv import ForwardKinematics, SolveIk
 
 
@@ -30,19 +32,17 @@ def forward(req, res):
     return res
 
 
+class EchoServices(Node):
+    NODE_NAME = "echo_services"
+
+    def __init__(self):
+        super().__init__("echo_services")
+        self.create_service(SolveIk, "/test/solve_ik", solve_ik)
+        self.create_service(ForwardKinematics, "/test/forward_kinematics", forward)
+
+
 def main():
-    rclpy.init()
-    node = rclpy.create_node("echo_services")
-    node.create_service(SolveIk, "/test/solve_ik", solve_ik)
-    node.create_service(ForwardKinematics, "/test/forward_kinematics", forward)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    sys.exit(run_node(EchoServices))  # its SIGINT handling: a clean stop exits 0
 
 
 if __name__ == "__main__":
