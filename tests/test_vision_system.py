@@ -107,13 +107,23 @@ def _publish_until_logged(probe, proc, pattern, publish, timeout=15.0):
     raise AssertionError(f"{proc.name} did not log {pattern!r}:\n{proc.log_text()[-2000:]}")
 
 
-def _publish_frames(probe, pub_img, pub_info, frames, model, t0, fps=30.0):
+def _publish_frames(probe, pub_img, pub_info, frames, model, t0, fps=30.0, answers=None):
+    """Publish ``frames`` with capture stamps t0 + i / fps, one every 1 / fps s. With ``answers``
+    (the list the odometry lands in), each frame after the first waits up to 2 s for its
+    odometry: a tracker starved by a loaded machine skips frames by design (it keeps the newest
+    two), which is not what a test of its output is about."""
     from frog_vision.nodes.messages import array_to_image, camera_info_msg, s_to_stamp
+    n0 = len(answers) if answers is not None else 0
     for i, f in enumerate(frames):
         stamp = s_to_stamp(t0 + i / fps)
         pub_info.publish(camera_info_msg(model, stamp, "camera"))
         pub_img.publish(array_to_image(f, stamp, "camera"))
         probe.spin_for(1 / fps)
+        if answers is not None and i > 0:
+            try:
+                probe.spin_until(lambda: len(answers) >= n0 + i, 2.0, "odometry of the frame")
+            except TimeoutError:
+                pass                     # the count assert after it says how many came
 
 
 def test_tracker_bad_input_and_lost_tag(launch, probe):
@@ -150,9 +160,9 @@ def test_tracker_bad_input_and_lost_tag(launch, probe):
     # good frames of a robot moving at 2 cm/s: odometry with the capture stamps
     poses = [np.array([0.0, -0.1 + 0.02 * i / 30, math.pi / 2]) for i in range(45)]
     frames = [renderer.render(p, (0.02, 0.0, 0.0)) for p in poses]
-    _publish_frames(probe, pub_img, pub_info, frames, model, 2.0)
+    _publish_frames(probe, pub_img, pub_info, frames, model, 2.0, answers=est)
     probe.spin_for(1.0)
-    assert len(est) >= 30          # best effort: a few frames may be lost on the way
+    assert len(est) >= 30          # a few frames may still be skipped
     last = est[-1]
     k = round((_t(last.header.stamp) - 2.0) * 30)          # the capture stamp of one of the frames
     # (on a loaded machine the tracker may skip frames: it keeps only the newest two)
