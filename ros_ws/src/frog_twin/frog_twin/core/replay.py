@@ -364,6 +364,11 @@ def _sum_hist(hists) -> dict:
     return total
 
 
+def _pm(se: float | None, note: str = "") -> str:
+    """`` +- se`` for a known standard error, else nothing."""
+    return "" if se is None else f" +- {se:.2f}{note}"
+
+
 def format_summary(rows: list[dict], pool: dict) -> str:
     """Text of the ``--replay-all`` table with its pooled row."""
     head = (f"{'run':8s} {'P s':>5} {'seeds':>5} {'mean cm real/twin':>17} {'ratio':>5} {'max cm real/twin':>16} "
@@ -384,12 +389,9 @@ def format_summary(rows: list[dict], pool: dict) -> str:
     lat = pool["signed_lateral_ratio_twin_over_real"]
     out.append(f"{'pooled':8s} mean distance real {_fmt(pool['mean_distance_real_m'], 100, '.2f')} cm, "
                f"twin {_fmt(pool['mean_distance_twin_m'], 100, '.2f')} cm, twin/real {_fmt(ratio, 1, '.2f')}"
-               + (f" +- {pool['mean_distance_ratio_se']:.2f}" if pool.get("mean_distance_ratio_se") is not None else "")
-               + "; "
+               f"{_pm(pool.get('mean_distance_ratio_se'))}; "
                f"signed lateral offset twin/real {_fmt(lat, 1, '.2f')}"
-               + (f" +- {pool['signed_lateral_ratio_se']:.2f} (se, seed spread)"
-                  if pool.get("signed_lateral_ratio_se") is not None else "")
-               + " over "
+               f"{_pm(pool.get('signed_lateral_ratio_se'), ' (se, seed spread)')} over "
                f"{', '.join(pool['lateral_runs']) or 'no run'} (real |offset| > "
                f"{100 * pool['lateral_min_real_offset_m']:.0f} cm)")
     return "\n".join(out)
