@@ -500,6 +500,9 @@ def test_watchdog_cancels_the_pending_rear_when_the_planner_goes_silent(launch, 
     emu, bridge, log = start_pair(launch, probe, tmp_path,
                                   bridge_params={"pulse_ms": 500, "max_duty_cycle": 0.5, "primitive_timeout_s": 0.2},
                                   emulator_params={"imu_rate_hz": 0.0})
+    # a timeout within the front-to-rear delay is kept (that is this test) but named at start
+    bridge.wait_for_log(r"WARN.*primitive_timeout_s 0\.2 s is not longer than the front-to-rear delay 0\.5 s",
+                        timeout=10)
     diag = Diag(probe)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     probe.wait_for_subscriber("/frog/primitive")
@@ -534,6 +537,7 @@ def test_watchdog_cancels_the_pending_rear_when_the_planner_goes_silent(launch, 
         return probe.call(setter, SetParameters.Request(parameters=[p])).results[0]
     assert not set_timeout(0.0).successful
     assert set_timeout(5.0).successful
+    assert bridge.log_text().count("front-to-rear delay") == 1, "5 s > 0.5 s: no warning"
     t_fresh = time.time()
     pub.publish(Primitive(id=NAMES.index("B"), name="B"))
     probe.spin_until(lambda: len(h_lines(read_log(log), after=t_fresh)) >= 2, 10, "front and rear of the fresh B")

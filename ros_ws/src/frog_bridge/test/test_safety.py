@@ -239,3 +239,18 @@ def test_watchdog_cancels_the_pending_rear_pulse_on_a_fake_clock():
 def test_protection_limits_out_of_range_are_refused_by_name(kw, message):
     with pytest.raises(ValueError, match=message):
         ProtectionConfig(**kw)
+
+
+@pytest.mark.parametrize("timeout_s", [0.05, 0.2, 0.49, 0.51, 1.0, 3.0])
+def test_timeout_problem_names_exactly_the_timeouts_that_cancel_every_rear(timeout_s):
+    """The warning is given iff a primitive's own rear pair (due one pulse after it) meets a
+    tripped watchdog, checked by running the watchdog itself with the bridge's 10 ms timer."""
+    from frog_bridge.core.watchdog import PrimitiveWatchdog, timeout_problem
+    rear_delay = 0.5
+    w = PrimitiveWatchdog(timeout_s)
+    w.fed(100.0)
+    tripped_before_rear = any(w.check(100.0 + k * 0.01) for k in range(1, 51))
+    problem = timeout_problem(timeout_s, rear_delay)
+    assert (problem is not None) == tripped_before_rear
+    if problem:
+        assert f"{timeout_s:g} s" in problem and "0.5 s" in problem and "pulse_ms" in problem

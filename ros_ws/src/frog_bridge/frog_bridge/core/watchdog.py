@@ -73,3 +73,22 @@ class PrimitiveWatchdog:
         self.tripped = True
         self.trips += 1
         return True
+
+
+def timeout_problem(timeout_s: float, rear_delay_s: float) -> str | None:
+    """Why a watchdog ``timeout_s`` defeats the primitives it guards, or None.
+
+    A primitive's rear pair is due ``rear_delay_s`` (one pulse) after its front pair; a
+    watchdog no longer than that trips before every rear pair and cancels it, so a K or LR
+    kick would fire its front limbs only. Cancelling fires nothing, so this is not unsafe, only
+    useless: the caller warns and keeps the setting (a test may want exactly that).
+
+    >>> timeout_problem(3.0, 0.08) is None
+    True
+    >>> timeout_problem(0.2, 0.5)[:68]
+    'primitive_timeout_s 0.2 s is not longer than the front-to-rear delay'
+    """
+    if timeout_s > rear_delay_s:
+        return None
+    return (f"primitive_timeout_s {timeout_s:g} s is not longer than the front-to-rear delay {rear_delay_s:g} s "
+            f"(pulse_ms): the watchdog will cancel the rear pair of every primitive")

@@ -45,7 +45,7 @@ from frog_bridge.core.schedule import (
     CANCELLED_EMERGENCY, CANCELLED_LINK, CANCELLED_SHUTDOWN, CANCELLED_WATCHDOG, REFUSED_EMERGENCY, REFUSED_INVALID,
     REFUSED_LINK, REFUSED_STALLED, CommandScheduler)
 from soft_robot_common.serial_link import SerialLink
-from frog_bridge.core.watchdog import PrimitiveWatchdog
+from frog_bridge.core.watchdog import PrimitiveWatchdog, timeout_problem
 
 PARAMS = [
     Param("port", "/dev/ttyACM0", "serial device of the nRF52 relay (a pty link for the emulator)"),
@@ -120,6 +120,7 @@ class BridgeNode(Node):
             self.watchdog = PrimitiveWatchdog(p["primitive_timeout_s"])
         except ValueError as exc:
             raise ConfigurationError(str(exc)) from exc
+        self._warn_timeout(p["primitive_timeout_s"])
         self.framer = LineFramer(p["max_line_bytes"])
         self.counts: Counter[str] = Counter()           # lines and decode errors
         self.write_latency_ms: deque[float] = deque(maxlen=200)
@@ -159,7 +160,13 @@ class BridgeNode(Node):
     def _on_parameters(self, changed: dict) -> None:
         if "primitive_timeout_s" in changed:
             self.watchdog.timeout_s = changed["primitive_timeout_s"]
+            self._warn_timeout(changed["primitive_timeout_s"])
             self._check_watchdog()
+
+    def _warn_timeout(self, timeout_s: float) -> None:
+        problem = timeout_problem(timeout_s, self.pulse_s)
+        if problem:
+            self.get_logger().warn(problem)
 
     # -- helpers -----------------------------------------------------------------------
     def _now(self) -> float:
