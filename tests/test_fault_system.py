@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from frog_twin.core.faults import FAULT_CLASSES, parse_faults
+from frog_twin.twin import RESTART_READY_TIMEOUT_S
 
 pytestmark = pytest.mark.system
 
@@ -39,22 +40,16 @@ def _run(small_library, tmp_path, spec, *extra):
     return m, r.stdout, out
 
 
-def _restarted_tracker_got_no_camera(out):
-    """The known limit of docs/faults.md: a tracker restarted after its SIGKILL that never got one
-    camera_info (Fast DDS after a reader dies by SIGKILL, eProsima/Fast-DDS#5469)."""
-    logs = list((out / "ellipse").glob("tracker_node.[0-9]*.log"))
-    return bool(logs) and not any("camera model from camera_info" in f.read_text() for f in logs)
-
-
 @pytest.mark.parametrize("cls", ["camera", "link", "process", "time"])
 def test_recoverable_faults_complete_the_path_with_nothing_fired_on_stale_state(cls, small_library, tmp_path):
     m, stdout, out = _run(small_library, tmp_path, FAULT_CLASSES[cls])
-    if cls == "process" and m["faults"]["outcome"] != "completed" and _restarted_tracker_got_no_camera(out):
-        # that one signature only, and once: any other failure, or the same one again, fails
-        warnings.warn("the restarted tracker got no camera data (docs/faults.md, known limit); run again")
-        (tmp_path / "again").mkdir()
-        m, stdout, out = _run(small_library, tmp_path / "again", FAULT_CLASSES[cls])
     rep = m["faults"]
+    # a restarted tracker that never got a camera model (docs/faults.md) is killed and restarted
+    # again by the supervisor: one more restart and up to RESTART_READY_TIMEOUT_S more to recover
+    hung = [e["node"] for e in m["supervision"]["events"] if e["what"] == "hung"]
+    assert set(hung) <= {"tracker_node"}, m["supervision"]["events"]
+    if hung:
+        warnings.warn(f"a restarted tracker hung and was restarted again ({len(hung)}x, docs/faults.md)")
     faults = parse_faults(FAULT_CLASSES[cls])
     done = [what for _, what in rep["actions"]]
     for f in faults:       # every fault was applied while the frog was on the path, none refused
@@ -66,12 +61,16 @@ def test_recoverable_faults_complete_the_path_with_nothing_fired_on_stale_state(
     assert rep["stale_firings"] == [], rep["stale_firings"][:5]
     assert rep["n_firings"] >= 10
     assert rep["recorder_lost"] == 0, rep["recorder"]
-    assert all(pf["recovery_s"] is not None and pf["recovery_s"] < 15 for pf in rep["per_fault"]), rep["per_fault"]
+    def bound(pf):
+        extra = (RESTART_READY_TIMEOUT_S + 5) * hung.count("tracker_node")
+        return 15 + extra * pf["fault"].startswith("kill:tracker")
+    assert all(pf["recovery_s"] is not None and pf["recovery_s"] < bound(pf) for pf in rep["per_fault"]), \
+        rep["per_fault"]
     assert m["unclean_stops"] == [], m["unclean_stops"]
     if cls == "process":
         restarts = m["supervision"]["restarts"]
-        assert restarts["tracker_node"] == 1 and restarts["planner_node"] == 1 and restarts["recorder"] == 1 \
-            and restarts["camera_sim"] == 1, restarts
+        assert restarts["tracker_node"] == 1 + len(hung), restarts
+        assert restarts["planner_node"] == 1 and restarts["recorder"] == 1 and restarts["camera_sim"] == 1, restarts
         # the restarted recorder wrote a new file beside the first (recovered after its SIGKILL)
         assert len(list((out / "ellipse" / "recording").glob("*.mcap"))) >= 2
         assert list((out / "ellipse" / "recovered").glob("*.mcap")), "the killed recorder's file was not recovered"

@@ -5,12 +5,17 @@ again with the same command line after a back-off that doubles per restart of th
 (``backoff_s``, ``2 backoff_s``, ... up to ``backoff_max_s``), at most ``max_restarts``
 times. Nodes named in ``essential`` are not restarted (the simulated world: a new one would
 start from the initial pose); their exit, or a node out of restarts, ends the run with the
-reason in :attr:`Supervisor.stop_reason`. Every exit and restart is an event with its time,
-printed and kept for the run's report. Pure Python (no rclpy).
+reason in :attr:`Supervisor.stop_reason`. A node may also have a readiness check (a pattern
+its log must show within ``ready_timeout_s`` of each restart): a restarted process that is
+running but never gets ready (a middleware hang, docs/faults.md) is SIGKILLed and handled as
+a crash. The first start is the caller's to wait for.
+Every exit and restart is an event with its time, printed and kept for the run's report.
+Pure Python (no rclpy).
 """
 
 from __future__ import annotations
 
+import re
 import signal
 import time
 from dataclasses import dataclass, field
@@ -42,7 +47,7 @@ class SupervisionEvent:
 
     time: float
     node: str
-    what: str            # "exited" (a restart follows), "restarted", "not restarted", "released"
+    what: str            # "exited" (a restart follows), "restarted", "not restarted", "released", "hung"
     code: Optional[int] = None
     detail: str = ""
 
@@ -72,6 +77,9 @@ class _Slot:
     given_up: bool = False                    # essential, or out of restarts
     released: bool = False                    # its exit was meant (release)
     history: list = field(default_factory=list)   # every process this slot ran
+    ready: Optional[re.Pattern] = None        # its log shows this once the node works
+    ready_timeout_s: float = 0.0
+    ready_seen: bool = False
 
 
 class Supervisor:
@@ -87,9 +95,16 @@ class Supervisor:
         self.stop_reason: Optional[str] = None
         self._slots: dict[str, _Slot] = {}
 
-    def add(self, name: str, process: NodeProcess, start: Callable[[str], NodeProcess]) -> None:
-        """Supervise ``process`` of node ``name``; ``start(label)`` starts it again (log ``<label>.log``)."""
-        self._slots[name] = _Slot(name, start, process, history=[process])
+    def add(self, name: str, process: NodeProcess, start: Callable[[str], NodeProcess],
+            ready: Optional[str] = None, ready_timeout_s: float = 30.0) -> None:
+        """Supervise ``process`` of node ``name``; ``start(label)`` starts it again (log ``<label>.log``).
+
+        ``ready``: a regex the log of each restarted process must match within ``ready_timeout_s``,
+        or the process is taken for hung: SIGKILLed, then restarted (or given up) like a crash."""
+        if ready is not None and not ready_timeout_s > 0:
+            raise ValueError(f"ready_timeout_s {ready_timeout_s!r} must be > 0")
+        self._slots[name] = _Slot(name, start, process, history=[process],
+                                  ready=re.compile(ready) if ready else None, ready_timeout_s=ready_timeout_s)
 
     def process(self, name: str) -> NodeProcess:
         return self._slots[name].process
@@ -127,6 +142,9 @@ class Supervisor:
         for slot in self._slots.values():
             if slot.given_up:
                 continue
+            if (slot.due is None and slot.restarts and slot.ready is not None and not slot.ready_seen
+                    and slot.process.running()):
+                self._check_ready(slot, now)
             if slot.due is None and not slot.process.running():
                 code = slot.process.proc.returncode
                 slot.process.stop()      # reap what is left of its process group, close its log
@@ -145,10 +163,21 @@ class Supervisor:
                 slot.due = None
                 slot.process = slot.start(f"{slot.name}.{slot.restarts}")
                 slot.history.append(slot.process)
+                slot.ready_seen = False
                 self._event(slot.name, "restarted", None, f"restart {slot.restarts}, log {slot.process.log_path}")
                 if self.on_restart is not None:
                     self.on_restart(slot.name, slot.process)
         return self.stop_reason
+
+    def _check_ready(self, slot: _Slot, now: float) -> None:
+        """Kill a process that has not logged its readiness pattern in time (poll() then restarts it)."""
+        if slot.ready.search(slot.process.log_text()):
+            slot.ready_seen = True
+        elif now - slot.process.started_at > slot.ready_timeout_s:
+            self._event(slot.name, "hung", None, f"no {slot.ready.pattern!r} in its log within "
+                        f"{slot.ready_timeout_s:g} s of its start; SIGKILL")
+            slot.process.send(signal.SIGKILL)
+            slot.process.wait(10)
 
     def stop_all(self, warn: Callable[[str], None] = print) -> None:
         """Stop every running process in reverse start order; warn for any that did not exit 0."""

@@ -69,3 +69,53 @@ def test_policy_rejects_nonsense():
     with pytest.raises(ValueError, match="max_restarts"):
         RestartPolicy(max_restarts=-1)
     assert RestartPolicy(backoff_s=1.0, backoff_max_s=3.0).delay(5) == 3.0
+
+
+def test_a_node_that_never_gets_ready_is_killed_and_restarted(tmp_path):
+    """A restarted process whose log never shows the readiness pattern counts as hung: SIGKILL,
+    then the normal restart; a restart that does get ready is left alone past the timeout.
+    The first start is not checked (the caller waits for it)."""
+    starts = []
+
+    def start(label):       # the first restart hangs, the second works
+        cmd = "exec sleep 60" if not starts else "echo camera model from camera_info; exec sleep 60"
+        starts.append(label)
+        return NodeProcess(["sh", "-c", cmd], dict(os.environ), tmp_path / f"{label}.log", label)
+    sup = Supervisor(RestartPolicy(max_restarts=2, backoff_s=0.0), log=lambda s: None)
+    sup.add("tracker", _sleeper(tmp_path, "tracker"), start, ready="camera model from", ready_timeout_s=0.5)
+    try:
+        end = time.monotonic() + 1.0          # the first start: never checked
+        while time.monotonic() < end:
+            sup.poll()
+            time.sleep(0.05)
+        assert sup.events == [] and sup.process("tracker").running()
+        sup.process("tracker").send(signal.SIGKILL)
+        _poll_until(sup, lambda: any(e.what == "restarted" for e in sup.events))
+        first = sup.process("tracker")
+        _poll_until(sup, lambda: sum(e.what == "restarted" for e in sup.events) == 2)
+        hung = [e for e in sup.events if e.what == "hung"]
+        assert len(hung) == 1 and "within 0.5 s" in hung[0].detail
+        assert hung[0].time - first.started_at >= 0.5
+        assert describe_exit(first.proc.returncode) == "SIGKILL"
+        end = time.monotonic() + 1.5          # three timeouts: the ready restart keeps running
+        while time.monotonic() < end:
+            sup.poll()
+            time.sleep(0.05)
+        assert sup.process("tracker").running() and sup.stop_reason is None
+        assert [e.what for e in sup.events] == ["exited", "restarted", "hung", "exited", "restarted"]
+    finally:
+        sup.stop_all(warn=lambda s: None)
+
+
+def test_a_node_out_of_restarts_that_hangs_ends_the_run(tmp_path):
+    sup = Supervisor(RestartPolicy(max_restarts=1, backoff_s=0.0), log=lambda s: None)
+    sup.add("tracker", _sleeper(tmp_path, "tracker"), lambda label: _sleeper(tmp_path, label),
+            ready="never printed", ready_timeout_s=0.3)
+    try:
+        sup.process("tracker").send(signal.SIGKILL)
+        _poll_until(sup, lambda: sup.stop_reason is not None)
+        assert sup.stop_reason.startswith("tracker exited (SIGKILL; 1 restart(s) used)")
+        with pytest.raises(ValueError, match="ready_timeout_s"):
+            sup.add("x", sup.process("tracker"), lambda label: None, ready="x", ready_timeout_s=0)
+    finally:
+        sup.stop_all(warn=lambda s: None)
