@@ -111,3 +111,21 @@ def test_the_stale_state_check_catches_a_planner_deciding_on_a_frozen_camera(sma
     assert len(stale) >= 2, stale
     assert all(s["pose_age"] > rep["pose_bound_s"] for s in stale)
     assert "limb firings on state older than the bound: 0" not in stdout
+
+
+def test_a_restarted_tracker_that_never_gets_a_camera_is_taken_for_hung(small_library, tmp_path):
+    """The camera killed for good, then the tracker: each restarted tracker waits for a camera_info
+    that never comes, which is what a hung one looks like (docs/faults.md). The supervisor kills
+    each after RESTART_READY_TIMEOUT_S; out of restarts, the run stops cleanly, naming it."""
+    m, stdout, _ = _run(small_library, tmp_path, "kill:camera_sim@2,restart=no;kill:tracker_node@3",
+                        "--stuck-timeout", "200")
+    rep = m["faults"]
+    events = m["supervision"]["events"]
+    hung = [e for e in events if e["what"] == "hung"]
+    assert [e["node"] for e in hung] == ["tracker_node"] * 3, events
+    restarted = [e["time"] for e in events if e["what"] == "restarted" and e["node"] == "tracker_node"]
+    assert all(h["time"] - r >= RESTART_READY_TIMEOUT_S for h, r in zip(hung, restarted)), (hung, restarted)
+    assert rep["outcome"] == "stopped", (rep["stop_reason"], m["unclean_stops"], stdout[-3000:])
+    assert rep["stop_reason"].startswith("tracker_node exited (SIGKILL; 3 restart(s) used)"), rep["stop_reason"]
+    assert rep["stale_firings"] == [] and rep["recorder_lost"] == 0
+    assert m["unclean_stops"] == []

@@ -76,6 +76,7 @@ class _Slot:
     due: Optional[float] = None               # monotonic time of the pending restart
     given_up: bool = False                    # essential, or out of restarts
     released: bool = False                    # its exit was meant (release)
+    ended_run: bool = False                   # its exit (crash or hang, not restarted) is the stop reason
     history: list = field(default_factory=list)   # every process this slot ran
     ready: Optional[re.Pattern] = None        # its log shows this once the node works
     ready_timeout_s: float = 0.0
@@ -114,8 +115,10 @@ class Supervisor:
         return [p for s in self._slots.values() for p in s.history]
 
     def unclean_stops(self) -> list[str]:
-        """Nodes whose last process did not end by SIGINT with code 0 (released nodes excepted)."""
-        return [s.name for s in self._slots.values() if not s.released and not s.process.stopped_cleanly]
+        """Nodes whose last process did not end by SIGINT with code 0 at the run's stop (released nodes,
+        and nodes whose exit ended the run, named in :attr:`stop_reason`, excepted)."""
+        return [s.name for s in self._slots.values()
+                if not (s.released or s.ended_run) and not s.process.stopped_cleanly]
 
     def names(self) -> list[str]:
         return list(self._slots)
@@ -149,7 +152,7 @@ class Supervisor:
                 code = slot.process.proc.returncode
                 slot.process.stop()      # reap what is left of its process group, close its log
                 if slot.name in self.essential or slot.restarts >= self.policy.max_restarts:
-                    slot.given_up = True
+                    slot.given_up = slot.ended_run = True
                     detail = ("essential, not restarted" if slot.name in self.essential
                               else f"{slot.restarts} restart(s) used")
                     self._event(slot.name, "not restarted", code, detail)

@@ -2,6 +2,7 @@
 
 import os
 import signal
+import sys
 import time
 
 import pytest
@@ -54,7 +55,9 @@ def test_killed_node_is_restarted_after_its_backoff_and_the_backoff_doubles(tmp_
 def test_essential_node_is_not_restarted(tmp_path):
     sup = Supervisor(RestartPolicy(backoff_s=0.0), essential={"world"}, log=lambda s: None)
     sup.add("world", _sleeper(tmp_path, "world"), lambda label: _sleeper(tmp_path, label))
-    sup.add("other", _sleeper(tmp_path, "other"), lambda label: _sleeper(tmp_path, label))
+    bad_exit = "import signal, sys, time; signal.signal(signal.SIGINT, lambda *a: sys.exit(3)); time.sleep(60)"
+    sup.add("other", NodeProcess([sys.executable, "-c", bad_exit], dict(os.environ), tmp_path / "other.log", "other"),
+            lambda label: _sleeper(tmp_path, label))
     try:
         sup.process("world").send(signal.SIGTERM)
         _poll_until(sup, lambda: sup.stop_reason is not None)
@@ -63,6 +66,7 @@ def test_essential_node_is_not_restarted(tmp_path):
         assert len(sup.processes()) == 2 and sup.process("other").running()
     finally:
         sup.stop_all(warn=lambda s: None)
+    assert sup.unclean_stops() == ["other"], "exit 3 on SIGINT is unclean; the world's exit is the stop reason"
 
 
 def test_policy_rejects_nonsense():
@@ -119,3 +123,4 @@ def test_a_node_out_of_restarts_that_hangs_ends_the_run(tmp_path):
             sup.add("x", sup.process("tracker"), lambda label: None, ready="x", ready_timeout_s=0)
     finally:
         sup.stop_all(warn=lambda s: None)
+    assert sup.unclean_stops() == [], "its exit is the stop reason, not an unclean stop at the end"
