@@ -124,7 +124,8 @@ def test_a_restarted_tracker_that_never_gets_a_camera_is_taken_for_hung(small_li
     hung = [e for e in events if e["what"] == "hung"]
     assert [e["node"] for e in hung] == ["tracker_node"] * 3, events
     restarted = [e["time"] for e in events if e["what"] == "restarted" and e["node"] == "tracker_node"]
-    assert all(h["time"] - r >= RESTART_READY_TIMEOUT_S for h, r in zip(hung, restarted)), (hung, restarted)
+    # the 'restarted' event is logged just after the process starts, where the timeout counts from
+    assert all(h["time"] - r >= RESTART_READY_TIMEOUT_S - 0.5 for h, r in zip(hung, restarted)), (hung, restarted)
     assert rep["outcome"] == "stopped", (rep["stop_reason"], m["unclean_stops"], stdout[-3000:])
     assert rep["stop_reason"].startswith("tracker_node exited (SIGKILL; 3 restart(s) used)"), rep["stop_reason"]
     assert rep["stale_firings"] == [] and rep["recorder_lost"] == 0
