@@ -37,17 +37,47 @@ def _runs(args):
              path, seed, [f]) for path, seed, f in plan]
 
 
+def _shard(runs, shard: str | None):
+    """The runs of shard 'K/N' (every N-th from the K-th), all runs without one."""
+    if shard is None:
+        return runs
+    k, n = (int(v) for v in shard.split("/"))
+    return runs[k - 1::n]
+
+
+def _result_file(out: Path, label: str) -> Path:
+    return out / label / "result.json"
+
+
+def _gathered(out: Path, runs):
+    """The results of the campaign's runs done so far in ``out`` (by this process or another shard)."""
+    done = []
+    for label, *_ in runs:
+        f = _result_file(out, label)
+        if f.is_file():
+            try:
+                done.append(json.loads(f.read_text()))
+            except ValueError:        # a shard writing it just now; it is read at that shard's end
+                pass
+    return done
+
+
 def main_campaign(args, root: Path) -> int:
     from frog_twin.twin import run_path
-    runs = _runs(args)
+    planned = _runs(args)
+    runs = _shard(planned, args.campaign_shard)
     out = args.out or root / "runs" / time.strftime("faults_%Y%m%d_%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
-    print(f"fault campaign: {len(runs)} runs -> {out}", flush=True)
-    results = []
-    for i, (label, path, seed, faults) in enumerate(runs, 1):
-        print(f"[{i}/{len(runs)}] {label}: {'; '.join(f.label() for f in faults)}", flush=True)
+    todo = [r for r in runs if not _result_file(out, r[0]).is_file()]
+    print(f"fault campaign: {len(runs)} runs" + (f" (shard {args.campaign_shard} of {len(planned)})"
+                                                  if args.campaign_shard else "")
+          + (f", {len(runs) - len(todo)} already done in it" if len(todo) < len(runs) else "")
+          + f" -> {out}", flush=True)
+    for i, (label, path, seed, faults) in enumerate(todo, 1):
+        print(f"[{i}/{len(todo)}] {label}: {'; '.join(f.label() for f in faults)}", flush=True)
         a = copy.copy(args)
         a.seed = seed
+        started = time.monotonic()
         try:
             m = run_path(a, path, out / label / path, faults=faults)
             rep = m["faults"]
@@ -55,14 +85,22 @@ def main_campaign(args, root: Path) -> int:
             rep = {"outcome": "failed", "stop_reason": f"{type(exc).__name__}: {exc}",
                    "traceback": traceback.format_exc(), "stale_firings": [], "recorder_lost": 0,
                    "per_fault": [{"fault": f.label(), "recovery_s": None} for f in faults]}
-        rep.update(label=label, path=path, seed=seed)
-        results.append(rep)
+        rep.update(label=label, path=path, seed=seed, wall_s=round(time.monotonic() - started, 1))
         print(f"    -> {rep['outcome']}" + (f" ({rep['stop_reason']})" if rep.get("stop_reason") else "")
               + f"; stale firings {len(rep['stale_firings'])}, recorder lost {rep['recorder_lost']}", flush=True)
-        (out / "campaign.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
+        # one file per run, written whole: an interrupted campaign resumes from them (same --out)
+        f = _result_file(out, label)
+        f.parent.mkdir(parents=True, exist_ok=True)
+        tmp = f.with_suffix(".tmp")
+        tmp.write_text(json.dumps(rep, indent=1, default=float) + "\n")
+        tmp.replace(f)
+    results = _gathered(out, planned)
+    (out / "campaign.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
     table = summary_table(results)
-    (out / "campaign.md").write_text(table + "\n")
+    head = f"{len(results)} of {len(planned)} runs of the campaign done"
+    (out / "campaign.md").write_text(head + "\n\n" + table + "\n")
     print()
+    print(head)
     print(table)
     print(f"\nper-run details: {out / 'campaign.json'}")
     bad = [r for r in results if r["outcome"] == "failed"]

@@ -30,6 +30,8 @@ frog-twin --path line --faults "camera_freeze@4+5;kill:tracker_node@12"
 frog-twin --path sine --faults "unplug@5+2;sigstop:planner_node@9+4;emergency@14"
 frog-twin --fault-campaign                          # every fault x 3 moments x 3 seeds x line, sine
 frog-twin --fault-campaign --fault-classes --campaign-paths line   # reduced: one run per fault class
+frog-twin --fault-campaign --out runs/faults --campaign-shard 1/2 &  # two processes share one campaign;
+frog-twin --fault-campaign --out runs/faults --campaign-shard 2/2    # the same command resumes it
 
 Hardware replay: re-run one of the real robot's closed-loop experiments (the authors' logs,
 shared/data/frog/hardware_runs/) from its logged start pose (tag offset applied), at its
@@ -661,6 +663,10 @@ def main(argv=None) -> int:
     fg.add_argument("--campaign-paths", default="line,sine", help="paths of the campaign (comma-separated)")
     fg.add_argument("--campaign-faults", default=None, metavar="SPEC",
                     help="the campaign's faults instead of its default list (their times are replaced by the moments)")
+    fg.add_argument("--campaign-shard", default=None, metavar="K/N",
+                    help="with --fault-campaign: only every N-th run from the K-th, so that N processes share a "
+                         "campaign (same --out); runs already done in --out are skipped, so the same command "
+                         "resumes an interrupted campaign")
     fg.add_argument("--moments", type=int, default=3, choices=(1, 2, 3),
                     help="moments of the path per fault: 3 = 0.2, 0.45, 0.7 of its nominal time; 2 = 0.2, 0.7; "
                          "1 = 0.45")
@@ -737,8 +743,12 @@ def main(argv=None) -> int:
                 parse_faults(args.campaign_faults)
             except FaultSpecError as exc:
                 ap.error(str(exc))
-    elif args.fault_classes or args.campaign_faults is not None:
-        ap.error("--fault-classes and --campaign-faults go with --fault-campaign")
+        if args.campaign_shard is not None:
+            k, _, n = args.campaign_shard.partition("/")
+            if not (k.isdigit() and n.isdigit() and 1 <= int(k) <= int(n)):
+                ap.error(f"--campaign-shard {args.campaign_shard}: expected K/N with 1 <= K <= N, e.g. 1/2")
+    elif args.fault_classes or args.campaign_faults is not None or args.campaign_shard is not None:
+        ap.error("--fault-classes, --campaign-faults and --campaign-shard go with --fault-campaign")
     try:
         args.settings = from_arguments(PlannerSettings, args)
         args.path_settings = from_arguments(PathSettings, args, path_type="line")
