@@ -130,3 +130,62 @@ def test_a_restarted_tracker_that_never_gets_a_camera_is_taken_for_hung(small_li
     assert rep["stop_reason"].startswith("tracker_node exited (SIGKILL; 3 restart(s) used)"), rep["stop_reason"]
     assert rep["stale_firings"] == [] and rep["recorder_lost"] == 0
     assert m["unclean_stops"] == []
+
+
+def _started_by(pid: int) -> list[int]:
+    """The live processes whose NodeProcess environment names ``pid`` as the one that started them."""
+    from soft_robot_common.processes import PARENT_PID_ENV
+    mark = f"{PARENT_PID_ENV}={pid}".encode()
+    found = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if mark in (d / "environ").read_bytes().split(b"\0"):
+                    found.append(int(d.name))
+            except OSError:
+                pass
+    return found
+
+
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGKILL"])
+def test_a_twin_terminated_or_killed_leaves_no_node_running(sig, small_library, tmp_path):
+    """SIGTERM (kill, timeout) ends frog-twin as Ctrl-C does, its nodes stopped first; after a
+    SIGKILL, which it cannot handle, every node stops by itself (SIGTERM from the kernel)."""
+    import signal
+    import time
+
+    from mcap.reader import make_reader
+    out = tmp_path / "twin"
+    log = tmp_path / "twin.log"
+    with open(log, "w") as f:
+        p = subprocess.Popen([sys.executable, "-m", "frog_twin.twin", "--library", str(small_library), "--path",
+                              "line", "--duration", "60", "--out", str(out)], stdout=f, stderr=subprocess.STDOUT,
+                             text=True)
+    try:
+        deadline = time.monotonic() + 180
+        while "following" not in log.read_text() and p.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert "following" in log.read_text(), log.read_text()[-3000:]
+        nodes = _started_by(p.pid)
+        assert len(nodes) >= 8, nodes       # sim, camera, tracker, preview, emulator, bridge, planner, recorder
+        time.sleep(2.0)                     # the frog under way
+        p.send_signal(getattr(signal, sig))
+        code = p.wait(60)
+        deadline = time.monotonic() + 30
+        while _started_by(p.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert _started_by(p.pid) == [], f"left running after {sig}: {_started_by(p.pid)}"
+    finally:
+        if p.poll() is None:
+            p.kill()
+    if sig == "SIGTERM":
+        assert code == 130 and "frog-twin: stopped (SIGTERM); its nodes are stopped" in log.read_text(), \
+            (code, log.read_text()[-2000:])
+    else:
+        assert code == -signal.SIGKILL
+    # either way the recorder had its normal shutdown: its file is closed (an MCAP with a summary)
+    (mcap,) = (out / "line" / "recording").glob("*.mcap")
+    with open(mcap, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics.message_count > 100
+    assert "closed 1 file(s)" in (out / "line" / "recorder.log").read_text()

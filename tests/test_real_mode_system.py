@@ -284,7 +284,8 @@ def test_lost_tag_stops_the_run_and_reports(video, library, launch, ros_domain, 
     assert ref["n"] > 50 and ref["mean_distance_to_tracked_m"] < 0.2, ref
 
 
-def test_ctrl_c_stops_the_run_and_reports(video, library, launch, ros_domain, tmp_path):
+@pytest.mark.parametrize("sig, reason", [("SIGINT", "Ctrl-C"), ("SIGTERM", "SIGTERM")])
+def test_ctrl_c_or_sigterm_stops_the_run_and_reports(sig, reason, video, library, launch, ros_domain, tmp_path):
     import signal
     link = _start_emulator(launch, tmp_path)
     out = tmp_path / "real"
@@ -295,18 +296,18 @@ def test_ctrl_c_stops_the_run_and_reports(video, library, launch, ros_domain, tm
             assert proc.poll() is None and time.monotonic() < deadline, "no 'h' line reached the port"
             time.sleep(0.2)
         t_stop = time.time()
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(getattr(signal, sig))
         stdout, stderr = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 0, stdout[-3000:] + stderr[-3000:]
-    assert "stopped (Ctrl-C)" in stdout
+    assert f"stopped ({reason})" in stdout
     with open(tmp_path / "commands.csv") as fh:
         late = [r for r in csv.DictReader(fh) if r["line"].startswith("h ")
                 and float(r["wall_time_s"]) > t_stop + PERIOD]
     assert not late, late
-    assert json.loads((out / "metrics.json").read_text())[0]["stop_reason"] == "Ctrl-C"
+    assert json.loads((out / "metrics.json").read_text())[0]["stop_reason"] == reason
 
 
 def test_ctrl_c_during_preflight_ends_at_once_without_actuation(video, library, ros_domain, probe, serial_pair,

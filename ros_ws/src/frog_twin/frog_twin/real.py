@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import math
-import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from soft_robot_common.graph import load_graph
+from soft_robot_common.tool_signals import redirect_stop_signals
 
 from frog_twin.core import twin_report
 from frog_twin.core.twin_recording import read_twin_recording
@@ -116,7 +116,7 @@ class RealWatch:
         self.link_state = None
         self.link_message = None
         self.stops = 0
-        self.interrupted = []     # Ctrl-C (the SIGINT handler of run_real)
+        self.interrupted = []     # Ctrl-C, SIGTERM, SIGHUP (the stop-signal handler of run_real)
         # camera_node publishes one camera_info per frame (with its size): the rate without the pixels
         node.create_subscription(CameraInfo, "/camera/camera_info", self._on_frame, 50)
         node.create_subscription(PoseStamped, "/frog/pose", self._on_pose, 10)
@@ -317,7 +317,7 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
     supervisor = Supervisor(RestartPolicy(), log=lambda s: print("  " + s, flush=True))
     reference = None             # the reference sim_node: outside the loop, not supervised
     interrupted = watch.interrupted
-    previous = signal.signal(signal.SIGINT, lambda *_: interrupted.append("Ctrl-C"))
+    restore_signals = redirect_stop_signals(interrupted.append)     # Ctrl-C, SIGTERM, SIGHUP: a graceful stop
     reason = None
     t_start = None
     try:
@@ -331,7 +331,7 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
         (out / "preflight.json").write_text(json.dumps([c.__dict__ for c in checks], indent=1) + "\n")
         failed = [c.message for c in checks if not c.ok]
         if interrupted:
-            failed.append("interrupted (Ctrl-C) during the pre-flight")
+            failed.append(f"interrupted ({interrupted[0]}) during the pre-flight")
         if failed:
             raise PreflightError(failed)
         if args.reference_sim:
@@ -356,7 +356,7 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
             lost = (now - restarting > VISION_RESTART_GRACE_S if restarting is not None
                     else now - last_pose > args.tag_lost_timeout)
             if interrupted:
-                reason = "Ctrl-C"
+                reason = interrupted[0]
             elif watch.stops:
                 reason = "stop received on /frog/stop"
             elif down:
@@ -375,7 +375,7 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
     finally:
         if reason is None:
             watch.stop_all()
-        signal.signal(signal.SIGINT, previous)
+        restore_signals()
         supervisor.stop_all()
         if reference is not None and reference.running():
             reference.stop()

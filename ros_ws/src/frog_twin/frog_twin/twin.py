@@ -64,6 +64,7 @@ from frog_vision.core.state_filter import FilterSettings
 from soft_robot_common.graph import GraphError, load_graph
 from soft_robot_common.graph_watch import GraphWatch
 from soft_robot_common.processes import NodeProcess, acquire_domain
+from soft_robot_common.tool_signals import stop_on_signals
 from soft_robot_common.supervision import RestartPolicy, Supervisor
 
 from frog_twin.core import twin_report
@@ -560,6 +561,17 @@ def print_graph(args) -> int:
 
 
 def main(argv=None) -> int:
+    """``frog-twin``; SIGTERM and SIGHUP stop it as Ctrl-C does, the nodes it started first."""
+    stop_on_signals()
+    try:
+        return _main(argv)
+    except KeyboardInterrupt as exc:
+        print(f"frog-twin: stopped ({exc.args[0] if exc.args else 'Ctrl-C'}); its nodes are stopped",
+              file=sys.stderr, flush=True)
+        return 130
+
+
+def _main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="frog-twin", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--path", default=None,

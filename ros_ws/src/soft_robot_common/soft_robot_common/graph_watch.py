@@ -11,6 +11,8 @@ from __future__ import annotations
 import time
 from typing import Callable, Iterable
 
+from .tool_signals import rclpy_call
+
 # Cheap requests with no side effect beyond an idempotent set: safe to re-send. (Kinematics
 # queries are not re-sent: a solve can take seconds on a loaded machine, and IK warm-starts.)
 IDEMPOTENT_SERVICES = {"ListParameters", "DescribeParameters", "GetParameters", "GetParameterTypes",
@@ -23,10 +25,12 @@ class GraphWatch:
     def __init__(self, domain_id, name: str = "graph_watch"):
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
         self._rclpy = rclpy
         self.domain_id = int(getattr(domain_id, "domain_id", domain_id))
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=self.domain_id)
+        # no rclpy signal handler: a tool stops its nodes itself on a signal (tool_signals)
+        rclpy.init(context=self.context, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -35,7 +39,8 @@ class GraphWatch:
     def spin_for(self, seconds: float) -> None:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
+            with rclpy_call():
+                self.executor.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
 
     def spin_until(self, predicate: Callable[[], bool], timeout: float, what: str = "condition",
                    procs: Iterable = ()) -> float:
@@ -53,7 +58,8 @@ class GraphWatch:
             for p in procs:
                 if not p.running():
                     raise RuntimeError(f"{p.name} exited early:\n{p.log_text()[-3000:]}")
-            self.executor.spin_once(timeout_sec=0.05)
+            with rclpy_call():
+                self.executor.spin_once(timeout_sec=0.05)
         if predicate():
             return timeout
         raise TimeoutError(f"{what} not reached within {timeout:g} s")

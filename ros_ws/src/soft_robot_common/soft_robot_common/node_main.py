@@ -7,6 +7,7 @@ raises :class:`ConfigurationError` for a value it cannot work with, and its ``ma
 
 from __future__ import annotations
 
+import ctypes
 import os
 import signal
 import sys
@@ -18,6 +19,9 @@ from rclpy.signals import SignalHandlerOptions
 
 from .clock_watch import SimClockWatch
 from .parameters import ConfigurationError, undeclared_overrides
+from .processes import PARENT_PID_ENV
+
+PR_SET_PDEATHSIG = 1     # <linux/prctl.h>
 
 
 class _StopRequest:
@@ -101,6 +105,25 @@ def _name(node_class, args=None) -> str:
     return ".".join(parts + [name])
 
 
+def stop_with_parent() -> None:
+    """A node started by one of our tools (``NodeProcess``) gets SIGTERM when the tool dies.
+
+    The tool stops its nodes itself; this is for when it cannot (SIGKILL, a crash), so that
+    no planner or bridge goes on alone. Linux only (prctl); the signal comes when the thread
+    that started the node ends, and all our tools start nodes from their main thread.
+    """
+    parent = os.environ.get(PARENT_PID_ENV, "")
+    if not (parent.isdigit() and sys.platform.startswith("linux")):
+        return
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    try:
+        os.kill(int(parent), 0)
+    except ProcessLookupError:       # it died before the prctl
+        os.kill(os.getpid(), signal.SIGTERM)
+    except PermissionError:          # alive, another user's
+        pass
+
+
 def run_node(node_class, args=None, close=None, executor=None) -> int:
     """Create and spin ``node_class()`` until SIGINT/SIGTERM; return the exit code.
 
@@ -114,6 +137,7 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
     stop = _StopRequest(_name(node_class, args))
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)
+    stop_with_parent()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     spinner = None

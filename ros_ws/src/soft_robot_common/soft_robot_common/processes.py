@@ -2,7 +2,8 @@
 
 Used by the main job, the twin entry scripts, the system tests and the benchmarks. Every
 process runs in its own session (process group) so a stop reaches the node and any
-children: SIGINT first (a node's normal shutdown), then SIGTERM, then SIGKILL. A domain id
+children: SIGINT first (a node's normal shutdown), then SIGTERM, then SIGKILL; a node also
+stops by itself when the process that started it dies, even by SIGKILL. A domain id
 is held exclusively through a lock file, so concurrent runs on one machine never share DDS
 traffic.
 """
@@ -20,6 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional
 
+#: set in a started node's environment to the starting process's pid: the node stops when that dies
+PARENT_PID_ENV = "SOFT_ROBOT_PARENT_PID"
 DOMAIN_RANGE = range(120, 230)   # Fast DDS ports overflow above domain 232
 LOCK_DIR = Path("/tmp/soft_robot_test_domains")
 
@@ -74,6 +77,7 @@ class NodeProcess:
         self.log_path = Path(log_path)
         self._log = open(self.log_path, "wb")
         self.started_at = time.monotonic()
+        env = dict(env, **{PARENT_PID_ENV: str(os.getpid())})
         self.proc = subprocess.Popen(self.argv, env=env, cwd=cwd, stdout=self._log,
                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                      start_new_session=True, preexec_fn=preexec_fn)
