@@ -73,38 +73,46 @@ def main_campaign(args, root: Path) -> int:
                                                   if args.campaign_shard else "")
           + (f", {len(runs) - len(todo)} already done in it" if len(todo) < len(runs) else "")
           + f" -> {out}", flush=True)
-    for i, (label, path, seed, faults) in enumerate(todo, 1):
-        print(f"[{i}/{len(todo)}] {label}: {'; '.join(f.label() for f in faults)}", flush=True)
-        a = copy.copy(args)
-        a.seed = seed
-        started = time.monotonic()
-        try:
-            m = run_path(a, path, out / label / path, faults=faults)
-            rep = m["faults"]
-        except Exception as exc:      # a run that breaks is a finding of the campaign, not its end
-            rep = {"outcome": "failed", "stop_reason": f"{type(exc).__name__}: {exc}",
-                   "traceback": traceback.format_exc(), "stale_firings": [], "recorder_lost": 0,
-                   "per_fault": [{"fault": f.label(), "recovery_s": None} for f in faults]}
-        rep.update(label=label, path=path, seed=seed, wall_s=round(time.monotonic() - started, 1))
-        print(f"    -> {rep['outcome']}" + (f" ({rep['stop_reason']})" if rep.get("stop_reason") else "")
-              + f"; stale firings {len(rep['stale_firings'])}, recorder lost {rep['recorder_lost']}", flush=True)
-        # one file per run, written whole: an interrupted campaign resumes from them (same --out)
-        f = _result_file(out, label)
-        f.parent.mkdir(parents=True, exist_ok=True)
-        tmp = f.with_suffix(".tmp")
-        tmp.write_text(json.dumps(rep, indent=1, default=float) + "\n")
-        tmp.replace(f)
-    results = _gathered(out, planned)
-    (out / "campaign.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
-    table = summary_table(results)
-    head = f"{len(results)} of {len(planned)} runs of the campaign done"
-    (out / "campaign.md").write_text(head + "\n\n" + table + "\n")
-    print()
-    print(head)
-    print(table)
-    print(f"\nper-run details: {out / 'campaign.json'}")
+    try:
+        for i, (label, path, seed, faults) in enumerate(todo, 1):
+            print(f"[{i}/{len(todo)}] {label}: {'; '.join(f.label() for f in faults)}", flush=True)
+            _run_one(args, run_path, out, label, path, seed, faults)
+    finally:       # also when stopped (Ctrl-C, SIGTERM): the table of what is done, and how to go on
+        results = _gathered(out, planned)
+        (out / "campaign.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
+        table = summary_table(results)
+        head = f"{len(results)} of {len(planned)} runs of the campaign done"
+        (out / "campaign.md").write_text(head + "\n\n" + table + "\n")
+        print()
+        print(head + ("" if len(results) == len(planned) else
+                      f" (the same command with --out {out} resumes it)"))
+        print(table)
+        print(f"\nper-run details: {out / 'campaign.json'}", flush=True)
     bad = [r for r in results if r["outcome"] == "failed"]
     return 1 if bad else 0
+
+
+def _run_one(args, run_path, out: Path, label: str, path: str, seed: int, faults) -> None:
+    """One run of the campaign; its result is written whole to ``<out>/<label>/result.json``."""
+    a = copy.copy(args)
+    a.seed = seed
+    started = time.monotonic()
+    try:
+        m = run_path(a, path, out / label / path, faults=faults)
+        rep = m["faults"]
+    except Exception as exc:      # a run that breaks is a finding of the campaign, not its end
+        rep = {"outcome": "failed", "stop_reason": f"{type(exc).__name__}: {exc}",
+               "traceback": traceback.format_exc(), "stale_firings": [], "recorder_lost": 0,
+               "per_fault": [{"fault": f.label(), "recovery_s": None} for f in faults]}
+    rep.update(label=label, path=path, seed=seed, wall_s=round(time.monotonic() - started, 1))
+    print(f"    -> {rep['outcome']}" + (f" ({rep['stop_reason']})" if rep.get("stop_reason") else "")
+          + f"; stale firings {len(rep['stale_firings'])}, recorder lost {rep['recorder_lost']}", flush=True)
+    # written whole (a rename): an interrupted campaign resumes from these files (same --out)
+    f = _result_file(out, label)
+    f.parent.mkdir(parents=True, exist_ok=True)
+    tmp = f.with_suffix(".tmp")
+    tmp.write_text(json.dumps(rep, indent=1, default=float) + "\n")
+    tmp.replace(f)
 
 
 def _kind(fault_label: str) -> str:

@@ -64,3 +64,21 @@ def test_a_bad_shard_is_refused(tmp_path, capsys):
         except SystemExit as exc:
             assert exc.code == 2
         assert f"--campaign-shard {bad}: expected K/N" in capsys.readouterr().err
+
+
+def test_a_stopped_campaign_writes_the_table_of_what_is_done(tmp_path, monkeypatch, capsys):
+    calls = []
+
+    def run_path(args, path, out, faults=()):
+        calls.append(out.parent.name)
+        if len(calls) == 3:
+            raise KeyboardInterrupt("SIGTERM")       # the twin's stop-signal handler
+        return {"faults": {"outcome": "stopped", "stop_reason": "x", "stale_firings": [], "recorder_lost": 0,
+                           "per_fault": [{"fault": f.label(), "recovery_s": None} for f in faults]}}
+    monkeypatch.setattr(twin, "run_path", run_path)
+    assert _campaign(tmp_path) == 130
+    printed = capsys.readouterr()
+    assert "2 of 4 runs of the campaign done (the same command with --out" in printed.out
+    assert "frog-twin: stopped (SIGTERM)" in printed.err
+    assert (tmp_path / "c" / "campaign.md").read_text().startswith("2 of 4 runs")
+    assert not (tmp_path / "c" / calls[2] / "result.json").exists()     # the interrupted run is redone
