@@ -284,10 +284,9 @@ VISION_NODES = ("camera_node", "tracker_node")
 #: How long a restarted vision node may take to deliver its first pose (a Python node's
 #: start-up, DDS discovery, the camera opening) before the tag counts as lost [s].
 VISION_RESTART_GRACE_S = 20.0
-# a restarted tracker that has tracked nothing within this is hung (docs/faults.md): killed and
-# restarted again, which also restarts the grace above
+# a restarted tracker that has tracked nothing within the twin's RESTART_READY_TIMEOUT_S is hung
+# (docs/faults.md): killed and restarted again, which also restarts the grace above
 REAL_RESTART_READY = {"tracker_node": "tag tracking"}
-REAL_RESTART_READY_TIMEOUT_S = 15.0
 
 
 def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
@@ -300,7 +299,7 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
     from soft_robot_common.supervision import RestartPolicy, Supervisor
 
     from frog_twin.core.twin_recording import recordings
-    from frog_twin.twin import _restarter
+    from frog_twin.twin import RESTART_READY_TIMEOUT_S, _restarter
     out.mkdir(parents=True, exist_ok=True)
     earlier = recordings(out / "recording")
     graph = real_graph(args, name, out, path_settings, settings)
@@ -323,7 +322,7 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
     try:
         for node in graph:
             supervisor.add(node.name, node.start(domain.env, out), _restarter(node, domain, out, watch.base),
-                           ready=REAL_RESTART_READY.get(node.name), ready_timeout_s=REAL_RESTART_READY_TIMEOUT_S)
+                           ready=REAL_RESTART_READY.get(node.name), ready_timeout_s=RESTART_READY_TIMEOUT_S)
         # before the start a node's exit fails the pre-flight (nothing restarts it: nothing to resume)
         checks = preflight(args, watch, supervisor.processes(), path, args.preflight_timeout)
         for c in checks:

@@ -207,6 +207,7 @@ VISION_NODES = ("camera_sim", "tracker_node", "image_preview")
 ESSENTIAL_NODES = ("sim_node", "robot_emulator")
 # A restarted tracker that has no camera model within this is hung (about 1 restart in 10 under
 # load never gets a camera topic, docs/faults.md): the supervisor kills and restarts it again.
+# The timeout holds in real mode too (its own ready pattern: frog_twin.real).
 RESTART_READY = {"tracker_node": "camera model from camera_info"}
 RESTART_READY_TIMEOUT_S = 15.0
 #: topics every twin run has (the bridge's are absent with --direct): the recorder's subscriptions to them
