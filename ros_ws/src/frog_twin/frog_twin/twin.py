@@ -30,8 +30,8 @@ frog-twin --path line --faults "camera_freeze@4+5;kill:tracker_node@12"
 frog-twin --path sine --faults "unplug@5+2;sigstop:planner_node@9+4;emergency@14"
 frog-twin --fault-campaign                          # every fault x 3 moments x 3 seeds x line, sine
 frog-twin --fault-campaign --fault-classes --campaign-paths line   # reduced: one run per fault class
-frog-twin --fault-campaign --out runs/faults --campaign-shard 1/2 &  # two processes share one campaign;
-frog-twin --fault-campaign --out runs/faults --campaign-shard 2/2    # the same command resumes it
+frog-twin --fault-campaign --out runs/faults --campaign-shard 1/2 &  # two processes share one campaign
+frog-twin --fault-campaign --out runs/faults --campaign-shard 2/2    # (4+ cores); rerun either to resume
 
 Hardware replay: re-run one of the real robot's closed-loop experiments (the authors' logs,
 shared/data/frog/hardware_runs/) from its logged start pose (tag offset applied), at its
@@ -678,8 +678,9 @@ def _main(argv=None) -> int:
                     help="the campaign's faults instead of its default list (their times are replaced by the moments)")
     fg.add_argument("--campaign-shard", default=None, metavar="K/N",
                     help="with --fault-campaign: only every N-th run from the K-th, so that N processes share a "
-                         "campaign (same --out); runs already done in --out are skipped, so the same command "
-                         "resumes an interrupted campaign")
+                         "campaign (same --out; a twin needs about 1.5 cores: on 2 cores run one, docs/faults.md); "
+                         "runs already done in --out are skipped, so the same command resumes an interrupted "
+                         "campaign")
     fg.add_argument("--moments", type=int, default=3, choices=(1, 2, 3),
                     help="moments of the path per fault: 3 = 0.2, 0.45, 0.7 of its nominal time; 2 = 0.2, 0.7; "
                          "1 = 0.45")
