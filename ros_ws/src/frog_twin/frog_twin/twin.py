@@ -587,8 +587,9 @@ def _main(argv=None) -> int:
     rg.add_argument("--paper-cost", action="store_true",
                     help="the paper's planner, as the robot ran it: eq. 19 at the leaf, weights 500/50/300, tangent "
                          "heading, relative metric (overrides the weight, look-ahead and correction options)")
-    rg.add_argument("--seeds", type=int, default=1,
-                    help="twin runs per log with seeds --seed, --seed+1, ... (pooled in the summary)")
+    rg.add_argument("--seeds", type=int, default=None,
+                    help="twin runs per log with seeds --seed, --seed+1, ... (pooled in the summary); also per "
+                         "case of --fault-campaign and --planner-compare (default 1; 3 for a full --fault-campaign)")
     rg.add_argument("--tag-offset-deg", type=float, default=None,
                     help="body heading - tag theta [deg] (default: estimated on the folder's line runs)")
     rg.add_argument("--ideal-loop", action="store_true",
@@ -704,6 +705,8 @@ def _main(argv=None) -> int:
     if real:
         return main_real(ap, args)
     replaying = args.replay is not None or args.replay_all is not None
+    if args.seeds is None:         # the campaign: every fault x 3 moments x 3 seeds
+        args.seeds = 3 if args.fault_campaign and not args.fault_classes else 1
     if args.duration is None and not replaying:
         args.duration = 150.0
     if not (args.real_time_factor > 0 and (args.duration is None or args.duration > 0)

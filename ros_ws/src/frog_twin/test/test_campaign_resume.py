@@ -82,3 +82,17 @@ def test_a_stopped_campaign_writes_the_table_of_what_is_done(tmp_path, monkeypat
     assert "frog-twin: stopped (SIGTERM)" in printed.err
     assert (tmp_path / "c" / "campaign.md").read_text().startswith("2 of 4 runs")
     assert not (tmp_path / "c" / calls[2] / "result.json").exists()     # the interrupted run is redone
+
+
+def test_the_full_campaign_is_three_moments_and_three_seeds_by_default(tmp_path, monkeypatch, capsys):
+    calls = []
+    _fake_runs(monkeypatch, calls)
+    lib = tmp_path / "lib.npz"
+    lib.touch()
+    base = ["--fault-campaign", "--library", str(lib)]
+    assert twin.main([*base, "--campaign-faults", "occlude@0+4", "--out", str(tmp_path / "a")]) == 0
+    assert len(calls) == 1 * 3 * 3 * 2                  # fault x moments x seeds x (line, sine)
+    assert {c.rsplit("_s", 1)[1] for c in calls} == {"1", "2", "3"}
+    calls.clear()
+    assert twin.main([*base, "--fault-classes", "--out", str(tmp_path / "b")]) == 0
+    assert len(calls) == 6 * 2                          # the reduced form: one seed per class and path
