@@ -563,13 +563,15 @@ def print_graph(args) -> int:
 
 def main(argv=None) -> int:
     """``frog-twin``; SIGTERM and SIGHUP stop it as Ctrl-C does, the nodes it started first."""
-    stop_on_signals()
+    restore = stop_on_signals()
     try:
         return _main(argv)
     except KeyboardInterrupt as exc:
         print(f"frog-twin: stopped ({exc.args[0] if exc.args else 'Ctrl-C'}); its nodes are stopped",
               file=sys.stderr, flush=True)
         return 130
+    finally:
+        restore()
 
 
 def _main(argv=None) -> int:

@@ -39,19 +39,27 @@ def rclpy_call():
         yield
     finally:
         _Deferred.depth -= 1
-        pending, _Deferred.pending = _Deferred.pending, None
-        if pending is not None and not _Deferred.depth:
+        if not _Deferred.depth and _Deferred.pending is not None:
+            pending, _Deferred.pending = _Deferred.pending, None
             raise KeyboardInterrupt(pending)
 
 
 def stop_on_signals():
-    """From now on SIGTERM and SIGHUP raise :class:`KeyboardInterrupt`, as SIGINT does.
+    """SIGTERM and SIGHUP raise :class:`KeyboardInterrupt`, as SIGINT does; returns the undo.
 
     :class:`~soft_robot_common.graph_watch.GraphWatch` installs no rclpy handler, and its
     spins defer a stop to their end (:func:`rclpy_call`).
     """
-    for sig in STOP_SIGNALS:
-        signal.signal(sig, _interrupt)
+    return _install(_interrupt)
+
+
+def _install(handler):
+    previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
+
+    def restore():
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+    return restore
 
 
 def stop_name(signum) -> str:
@@ -61,9 +69,4 @@ def stop_name(signum) -> str:
 
 def redirect_stop_signals(callback):
     """Every stop signal calls ``callback(stop_name)`` instead (a graceful stop); returns the undo."""
-    previous = {sig: signal.signal(sig, lambda signum, frame: callback(stop_name(signum))) for sig in STOP_SIGNALS}
-
-    def restore():
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    return restore
+    return _install(lambda signum, frame: callback(stop_name(signum)))

@@ -102,7 +102,7 @@ def test_sigterm_and_sighup_stop_a_tool_like_ctrl_c(sig):
 
 def test_a_stop_inside_an_rclpy_call_is_raised_when_the_call_returns():
     previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
-    stop_on_signals()
+    restore = stop_on_signals()
     reached = []
     try:
         with pytest.raises(KeyboardInterrupt, match="SIGTERM"):
@@ -115,5 +115,5 @@ def test_a_stop_inside_an_rclpy_call_is_raised_when_the_call_returns():
             os.kill(os.getpid(), signal.SIGINT)
             time.sleep(1)
     finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
+        restore()
+    assert {s: signal.getsignal(s) for s in previous} == previous
