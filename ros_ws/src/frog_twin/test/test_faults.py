@@ -1,6 +1,7 @@
 """The fault spec, the campaign plan and the run metrics of frog_twin.core.faults (no ROS)."""
 
 import math
+from dataclasses import replace
 
 import pytest
 
@@ -99,6 +100,21 @@ def test_stale_firings_flag_decisions_on_old_state_and_old_commands():
     # primitive I never fires anything: a firing with only I decided before it is flagged
     only_i = Observed(odom=[0.0, 1.0], decisions=[(0.5, "I")], fired=[0.6])
     assert stale_firings(only_i, [], 3.0, 0.7)[0]["why"] == "no primitive was decided before it"
+
+
+def test_odometry_another_subscriber_saw_counts_and_only_what_existed():
+    # the observer has no odometry from 5 s to 12 s (it had not matched a restarted tracker);
+    # the recording has it: firings decided then are on fresh state
+    fresh = _observed(odom_until=20.0)
+    gap = replace(fresh, odom=[t for t in fresh.odom if not 5.0 < t < 12.0])
+    assert stale_firings(gap, [], 3.0, 0.7)
+    assert stale_firings(gap, [], 3.0, 0.7, witness_odom=fresh.odom) == []
+    # a witness that also saw nothing there does not clear them
+    also_gap = [t for t in fresh.odom if not 5.0 < t < 12.0]
+    assert stale_firings(gap, [], 3.0, 0.7, witness_odom=also_gap) == stale_firings(gap, [], 3.0, 0.7)
+    # what the witness saw of a frozen camera is still the frame at the freeze's start
+    frozen = [Fault("camera_freeze", 5.0, 10.0)]
+    assert stale_firings(gap, frozen, 3.0, 0.7, witness_odom=fresh.odom) == stale_firings(fresh, frozen, 3.0, 0.7)
 
 
 def test_recovery_time_and_outcome():

@@ -216,7 +216,8 @@ def content_time(stamp: float, faults) -> float:
 CLOCK_SKEW_S = 0.05
 
 
-def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float, blind=()) -> list[dict]:
+def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float, blind=(),
+                  witness_odom=()) -> list[dict]:
     """Limb firings on state older than the bounds: one dict per offending firing.
 
     A firing comes from the last non-I primitive the observer received before it (arrival
@@ -226,8 +227,11 @@ def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float
     ``command_bound`` when it fires (a replayed or queued command). ``blind``: intervals in
     which the observer may not see the decisions (a restarted planner whose publisher it has
     not matched yet); an old-command verdict inside one is ``unverified``, not stale.
+    ``witness_odom``: odometry stamps another subscriber saw (the recording). The observer
+    matches a restarted tracker's publisher only after discovery, later than the planner may:
+    its own odometry alone made a kick on a 0.2 s old pose look 5 s old.
     """
-    odom = sorted(obs.odom)
+    odom = sorted(set(obs.odom) | set(witness_odom))
     stamps = sorted(t for t, n in obs.decisions if n != "I")
     by_arrival = len(obs.decision_seq) == len(obs.decisions) and len(obs.fired_seq) == len(obs.fired) \
         and obs.decision_seq
@@ -328,11 +332,14 @@ def outcome(goal: bool, stop_reason, stale: int, lost: int, unclean) -> str:
 
 
 def fault_report(faults, observer, sim_start: float, injector, recorded: dict, pose_bound: float,
-                 command_bound: float, goal: bool, stop_reason, unclean) -> dict:
-    """The fault section of a run's metrics: outcome, stale firings, recorder losses, recovery."""
+                 command_bound: float, goal: bool, stop_reason, unclean, recorded_odom=()) -> dict:
+    """The fault section of a run's metrics: outcome, stale firings, recorder losses, recovery.
+
+    ``recorded_odom``: the recording's odometry stamps, a second witness of what existed."""
     obs = observer.obs
     shifted = [replace(f, at=f.at + sim_start) for f in faults]
-    flagged = stale_firings(obs, shifted, pose_bound, command_bound, blind=observer.planner_blind())
+    flagged = stale_firings(obs, shifted, pose_bound, command_bound, blind=observer.planner_blind(),
+                            witness_odom=recorded_odom)
     stale = [b for b in flagged if not b.get("unverified")]
     unverified = [b for b in flagged if b.get("unverified")]
     gaps = observer.discovery_gaps()
