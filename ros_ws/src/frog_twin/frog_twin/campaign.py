@@ -144,6 +144,9 @@ def summary_table(results) -> str:
     for kind, row in rows.items():
         rec = row["recovery"]
         rec_text = f"{statistics.median(rec):.1f} / {max(rec):.1f}" if rec else "-"
+        never = row["never"]
+        if kind == "emergency":      # latched until a person clears it: the run stops, by design
+            rec_text, never = "by a person", "-"
         lines.append(f"| {kind} | {row['runs']} | {row['completed']} | {row['stopped']} | {row['failed']} | "
-                     f"{row['stale']} | {row['unverified']} | {row['lost']} | {rec_text} | {row['never']} |")
+                     f"{row['stale']} | {row['unverified']} | {row['lost']} | {rec_text} | {never} |")
     return "\n".join(lines)

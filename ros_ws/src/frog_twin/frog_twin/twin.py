@@ -382,7 +382,9 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
             if watch.state == watch.Status.STATE_GOAL_REACHED:
                 goal = True
                 break
-            if watch.state == watch.Status.STATE_FOLLOWING:
+            # the stuck timeout counts from the end of a restart (a hung tracker takes 15 s to be
+            # found and restarted again: the run must not stop while the supervisor recovers it)
+            if watch.state == watch.Status.STATE_FOLLOWING or supervisor.recovering():
                 last_following = observer.sim_now
             if observer.emergency:
                 stop_reason = f"the robot reported an emergency (bridge: {observer.emergency})"
@@ -691,7 +693,8 @@ def _main(argv=None) -> int:
                     help="set a node's parameter for this run (YAML value; repeatable), e.g. "
                          "--node-param tracker_node:frozen_frames=5 --node-param planner_node:stale_periods=3")
     fg.add_argument("--stuck-timeout", type=float, default=20.0,
-                    help="stop the run cleanly when the planner has not followed for this long [s simulated]")
+                    help="stop the run cleanly when the planner has not followed for this long [s simulated], "
+                         "counted from the end of a node's restart")
     add_arguments(ap, PlannerSettings)
     add_arguments(ap, PathSettings, exclude=("path_type", "path_start_x", "path_start_y", "path_heading",
                                              "waypoint_file"))

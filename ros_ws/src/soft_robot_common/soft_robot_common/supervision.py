@@ -129,6 +129,11 @@ class Supervisor:
         slot.given_up = slot.released = True
         self._event(name, "released", None, why)
 
+    def recovering(self) -> list[str]:
+        """Nodes on their way back: waiting for their restart, or restarted and not yet ready."""
+        return [s.name for s in self._slots.values() if not s.given_up and (
+            s.due is not None or (s.restarts and s.ready is not None and not s.ready_seen and s.process.running()))]
+
     def down(self, name: str) -> bool:
         """Whether node ``name`` is not running now (crashed, waiting for its restart)."""
         return not self._slots[name].process.running()

@@ -124,3 +124,36 @@ def test_a_node_out_of_restarts_that_hangs_ends_the_run(tmp_path):
     finally:
         sup.stop_all(warn=lambda s: None)
     assert sup.unclean_stops() == [], "its exit is the stop reason, not an unclean stop at the end"
+
+
+def test_a_node_is_recovering_from_its_exit_until_its_restart_is_ready(tmp_path):
+    starts = []
+
+    def start(label):       # the first restart hangs, the second gets ready
+        cmd = "exec sleep 60" if not starts else "sleep 0.3; echo camera model from camera_info; exec sleep 60"
+        starts.append(label)
+        return NodeProcess(["sh", "-c", cmd], dict(os.environ), tmp_path / f"{label}.log", label)
+    sup = Supervisor(RestartPolicy(max_restarts=2, backoff_s=0.3), log=lambda s: None)
+    sup.add("tracker", _sleeper(tmp_path, "tracker"), start, ready="camera model from", ready_timeout_s=0.6)
+    sup.add("planner", _sleeper(tmp_path, "planner"), lambda label: _sleeper(tmp_path, label))
+    seen = [sup.recovering()]
+    try:
+        sup.process("tracker").send(signal.SIGKILL)
+        sup.process("planner").send(signal.SIGKILL)
+        end = time.monotonic() + 20.0
+        while time.monotonic() < end and not (len(starts) == 2 and sup.recovering() == []):
+            sup.poll()
+            state = sorted(sup.recovering())
+            if seen[-1] != state:
+                seen.append(state)
+            time.sleep(0.02)
+        # both wait for their restarts; the planner (no readiness pattern) is back once restarted,
+        # the tracker once a restart of it logs the pattern (the first one hangs and is restarted)
+        assert seen == [[], ["planner", "tracker"], ["tracker"], []], seen
+        assert [e.what for e in sup.events if e.node == "tracker"] == ["exited", "restarted", "hung", "exited",
+                                                                       "restarted"]
+        sup.process("tracker").send(signal.SIGKILL)        # out of restarts: given up, not recovering
+        _poll_until(sup, lambda: sup.stop_reason is not None)
+        assert sup.recovering() == []
+    finally:
+        sup.stop_all(warn=lambda s: None)
