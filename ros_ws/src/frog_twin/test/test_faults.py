@@ -156,6 +156,11 @@ def test_old_command_verdicts_inside_a_blind_interval_are_unverified_not_stale()
     assert [(b["fired"], b["unverified"]) for b in bad] == [(6.0, True)]
     bad = stale_firings(obs, [], 3.0, 0.7)
     assert [(b["fired"], b["unverified"]) for b in bad] == [(6.0, False)]
+    # the recording saw the restarted planner's decision behind it: verified, and fresh
+    assert stale_firings(obs, [], 3.0, 0.7, blind=[(4.0, 7.0)], witness_decisions=[(5.98, "C")]) == []
+    # it saw an I there (which fires nothing): the firing is still the 5 s old command's
+    bad = stale_firings(obs, [], 3.0, 0.7, witness_decisions=[(5.98, "I")])
+    assert [(b["fired"], b["decided"]) for b in bad] == [(6.0, 1.0)]
 
 
 def test_a_firing_stamped_just_before_its_decision_is_that_decision_s():

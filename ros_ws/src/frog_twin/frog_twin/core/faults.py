@@ -217,7 +217,7 @@ CLOCK_SKEW_S = 0.05
 
 
 def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float, blind=(),
-                  witness_odom=()) -> list[dict]:
+                  witness_odom=(), witness_decisions=()) -> list[dict]:
     """Limb firings on state older than the bounds: one dict per offending firing.
 
     A firing comes from the last non-I primitive the observer received before it (arrival
@@ -230,9 +230,11 @@ def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float
     ``witness_odom``: odometry stamps another subscriber saw (the recording). The observer
     matches a restarted tracker's publisher only after discovery, later than the planner may:
     its own odometry alone made a kick on a 0.2 s old pose look 5 s old.
+    ``witness_decisions``: (stamp, name) of primitives another subscriber saw (the recording),
+    for the decisions of a restarted planner the observer has not matched yet.
     """
     odom = sorted(set(obs.odom) | set(witness_odom))
-    stamps = sorted(t for t, n in obs.decisions if n != "I")
+    stamps = sorted({t for t, n in (*obs.decisions, *witness_decisions) if n != "I"})
     by_arrival = len(obs.decision_seq) == len(obs.decisions) and len(obs.fired_seq) == len(obs.fired) \
         and obs.decision_seq
     if by_arrival:
@@ -332,14 +334,16 @@ def outcome(goal: bool, stop_reason, stale: int, lost: int, unclean) -> str:
 
 
 def fault_report(faults, observer, sim_start: float, injector, recorded: dict, pose_bound: float,
-                 command_bound: float, goal: bool, stop_reason, unclean, recorded_odom=()) -> dict:
+                 command_bound: float, goal: bool, stop_reason, unclean, recorded_odom=(),
+                 recorded_decisions=()) -> dict:
     """The fault section of a run's metrics: outcome, stale firings, recorder losses, recovery.
 
-    ``recorded_odom``: the recording's odometry stamps, a second witness of what existed."""
+    ``recorded_odom``, ``recorded_decisions``: the recording's odometry stamps and (stamp,
+    primitive name), a second witness of what existed."""
     obs = observer.obs
     shifted = [replace(f, at=f.at + sim_start) for f in faults]
     flagged = stale_firings(obs, shifted, pose_bound, command_bound, blind=observer.planner_blind(),
-                            witness_odom=recorded_odom)
+                            witness_odom=recorded_odom, witness_decisions=recorded_decisions)
     stale = [b for b in flagged if not b.get("unverified")]
     unverified = [b for b in flagged if b.get("unverified")]
     gaps = observer.discovery_gaps()
