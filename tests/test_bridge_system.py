@@ -76,6 +76,25 @@ def start_pair(launch, probe, tmp_path, bridge_params=None, emulator_params=None
     return emu, bridge, log
 
 
+def read_after_marker(link, log, timeout=10.0):
+    """The emulator's wire log once it has read a marker line written now after everything
+    before it (the pty is in order), instead of "nothing more" after a fixed wait. A partial
+    line left on the wire merges with the marker and shows as a bad line."""
+    count = sum(line == "p 80" for _, line, _ in read_log(log))
+    fd = os.open(link, os.O_WRONLY | os.O_NOCTTY)
+    try:
+        os.write(fd, b"p 80\n")
+    finally:
+        os.close(fd)
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        rows = read_log(log)
+        if sum(line == "p 80" for _, line, _ in rows) > count or any(r.startswith("error") for _, _, r in rows):
+            break
+        time.sleep(0.005)
+    return rows
+
+
 def publish_primitive(probe, pub, name):
     from soft_robot_interfaces.msg import Primitive
     msg = Primitive(id=NAMES.index(name), name=name)
@@ -457,8 +476,7 @@ def test_shutdown_between_front_and_rear_sends_no_rear(launch, probe, tmp_path):
     wait_h_lines(log, 1, timeout=3)
     assert bridge.stop() == 0 and bridge.stopped_cleanly
     assert "shutdown: 1 pending pulse(s) cancelled" in bridge.log_text()
-    time.sleep(0.5)
-    rows = read_log(log)
+    rows = read_after_marker(tmp_path / "robot_tty", log)
     assert [line for _, line in h_lines(rows)] == ["h 1 0"]
     assert not [r for r in rows if r[2].startswith("error")]        # no partial line on the wire
     assert emu.stop() == 0
@@ -474,19 +492,19 @@ def test_frog_stop_cancels_the_pending_pulse_and_latches_until_cleared(launch, p
     probe.wait_for_subscriber("/frog/stop")
     probe.spin_for(1.0)
     publish_primitive(probe, pub, "B")          # front now, rear 300 ms later
-    wait_h_lines(log, 1, timeout=3)
+    fired_b = wait_h_lines(log, 1, timeout=3)
     stop.publish(Empty())
     bridge.wait_for_log(r"stop received on /frog/stop: 1 pending pulse\(s\) cancelled", timeout=5)
-    time.sleep(0.6)
-    assert [line for _, line in h_lines(read_log(log))] == ["h 1 0"]      # the rear pair never went out
     publish_primitive(probe, pub, "A")          # refused while stopped
     bridge.wait_for_log(r"refused: primitive A: stopped by frog/stop \(call ~/clear_emergency\)", timeout=5)
     assert trigger(probe, "/bridge_node/clear_emergency").success
     bridge.wait_for_log("stop cleared", timeout=5)
     t_clear = time.time()
-    probe.spin_for(0.5)
+    probe.spin_for(max(0.5, fired_b[-1][0] + 0.85 - time.time()))    # past the limbs' 0.8 s interval
     publish_primitive(probe, pub, "A")
     assert [line for _, line in wait_h_lines(log, 1, after=t_clear)] == ["h 1 0"]
+    # the wire is in order: a rear pair sent late, or A sent while stopped, is in the log before it
+    assert [line for _, line in h_lines(read_log(log))] == ["h 1 0", "h 1 0"]
     assert bridge.stop() == 0 and emu.stop() == 0
 
 
