@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from frog_planner.core.feasibility import (TurningLimits, radius_ahead, steady_turns, tight_stretches,
+from frog_planner.core.feasibility import (SteadyTurn, TurningLimits, radius_ahead, steady_turns, tight_stretches,
                                            turning_limited_floor, turning_limits)
 from frog_planner.core.paths import Path, sinusoid_path
 from frog_planner.core.transition_model import TransitionModel
@@ -59,6 +59,24 @@ def test_steady_circles_are_the_twist_ratio_of_the_kinematics(model, synthetic):
     assert "left 1.0 cm (G)" in lim.describe()
     slow = turning_limits(tuple(turns.values()), min_speed=0.01)   # G, H (5 mm/s) too slow: C, D
     assert slow.left_m == pytest.approx(0.015 / 0.35, rel=0.03)
+
+
+def test_no_action_is_no_turn_however_it_drifts():
+    """'No action' coasting on a drifting library state (default library: 3 mm/s on a 5 cm circle)
+    is not a turn the frog can hold; a limb-firing primitive as slow and as tight is."""
+    g = SteadyTurn("G", 0.065, 0.38, 0.017)
+    drift = SteadyTurn("I", 0.052, -0.079, 0.0029, acts=False)
+    tight = SteadyTurn("X", 0.052, -0.079, 0.0029)
+    assert turning_limits((g, drift)).right_m == math.inf
+    assert turning_limits((g, drift, tight)).right_m == pytest.approx(0.052)
+    assert turning_limits((g, drift)).left_m == pytest.approx(0.065)
+
+
+def test_steady_turns_mark_the_primitives_that_fire_no_limb(model):
+    turns = {t.primitive: t for t in steady_turns(model, PERIOD)}
+    bits = dict(zip(model.primitive_names, model.primitive_bits))
+    assert bits["I"] == "0000" and not turns["I"].acts
+    assert all(t.acts for name, t in turns.items() if name != "I")
 
 
 def test_tight_stretches_are_where_the_arc_was_placed():

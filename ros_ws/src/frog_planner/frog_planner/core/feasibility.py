@@ -43,6 +43,7 @@ class SteadyTurn:
     radius_m: float              # inf for a straight swim
     yaw_per_period_rad: float    # signed, + turning left (REP-103)
     speed_m_per_s: float         # along the circle
+    acts: bool = True            # fires a limb (False: 'no action', which only coasts)
 
     @property
     def side(self) -> int:
@@ -110,23 +111,26 @@ def steady_turns(model, period: float, periods: int = STEADY_PERIODS, settle: in
         yaw.append(trans[:, 2])
     track = np.array(track)[settle:]                          # (K, P, 2)
     yaw = np.array(yaw)[settle:]
+    bits = getattr(model, "primitive_bits", None) or [None] * n
     out = []
     for p, name in enumerate(model.primitive_names):
         step = np.linalg.norm(np.diff(track[:, p], axis=0), axis=1)
         dyaw = float(np.mean(yaw[:, p]))
         radius = _circle_radius(track[:, p]) if abs(dyaw) >= STRAIGHT_YAW else float("inf")
-        out.append(SteadyTurn(str(name), radius, dyaw, float(step.mean() / period)))
+        acts = bits[p] is None or "1" in str(bits[p])
+        out.append(SteadyTurn(str(name), radius, dyaw, float(step.mean() / period), acts))
     return tuple(out)
 
 
 def turning_limits(turns, min_speed: float = 0.002) -> TurningLimits:
-    """The tightest circles on each side among primitives that move (>= ``min_speed`` m/s).
+    """The tightest circles on each side among primitives that fire a limb and move (>= ``min_speed`` m/s).
 
-    A primitive that barely moves (no action, coasting to rest) traces a tiny "circle" that
-    is no way to follow a path, so it does not count.
+    A primitive that barely moves traces a tiny "circle" that is no way to follow a path, so
+    it does not count; nor does 'no action', whose drift (a library's nearest states at low
+    speed: about 3 mm/s on a 5 cm "circle" in the default library) is no turn the frog can hold.
     """
     def tightest(side):
-        r = [t.radius_m for t in turns if t.side == side and t.speed_m_per_s >= min_speed]
+        r = [t.radius_m for t in turns if t.side == side and t.acts and t.speed_m_per_s >= min_speed]
         return min(r) if r else float("inf")
     return TurningLimits(tightest(1), tightest(-1), tuple(turns))
 
