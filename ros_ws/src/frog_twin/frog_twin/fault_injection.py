@@ -14,7 +14,7 @@ from __future__ import annotations
 import signal
 import time
 
-from frog_twin.core.faults import Observed
+from frog_twin.core.faults import Observed, restart_windows
 
 #: simulated s after a node's restart in which the recorder may not yet have matched its publishers
 DISCOVERY_S = 3.0
@@ -81,6 +81,7 @@ class RunObserver:
         t = _stamp(msg)
         self.seen["/frog/planner/status"].append(t)
         self.obs.status.append((t, int(msg.state)))
+        self.obs.pose_ages.append((t, float(msg.pose_age)))
 
     def _on_fired(self, msg) -> None:
         t = _stamp(msg)
@@ -103,23 +104,18 @@ class RunObserver:
     def discovery_gaps(self) -> dict:
         """{topic: [(t0, t1)]}: from each restart to DISCOVERY_S after the first message seen on the topic
         after it (a restarted publisher is matched by the recorder only after discovery)."""
-        out = {}
-        for topic, stamps in self.seen.items():
-            gaps = []
-            for t0 in self.restarts:
-                later = [t for t in stamps if t > t0]
-                gaps.append((t0, (min(later) if later else float("inf")) + DISCOVERY_S))
-            out[topic] = gaps
-        return out
+        return {topic: restart_windows(self.restarts, stamps, DISCOVERY_S) for topic, stamps in self.seen.items()}
+
+    def odom_blind(self, witness_odom=()) -> list:
+        """[(t0, t1)]: from each node restart to DISCOVERY_S after the first odometry this node or
+        the witness (the recording) saw after it: a restarted tracker's publisher is matched by
+        each subscriber after its own discovery, the planner's possibly seconds before theirs."""
+        return restart_windows(self.restarts, [*self.obs.odom, *witness_odom], DISCOVERY_S)
 
     def planner_blind(self) -> list:
         """[(t0, t1)]: from each planner restart to DISCOVERY_S after the first decision seen from it
         (until then this node may not have matched the new planner's publisher)."""
-        out = []
-        for t0 in self.planner_restarts:
-            seen = [t for t, _ in self.obs.decisions if t > t0]
-            out.append((t0, (min(seen) if seen else float("inf")) + DISCOVERY_S))
-        return out
+        return restart_windows(self.planner_restarts, [t for t, _ in self.obs.decisions], DISCOVERY_S)
 
     def watch_recorder(self, subscribed: bool) -> None:
         """Called every poll with whether the recorder is subscribed to every checked topic."""

@@ -432,7 +432,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
             pose_bound=2.0 * settings.period + (FilterSettings.coast_timeout if not args.no_vision else 0.0) + 0.2,
             command_bound=float(bridge.get("max_command_age_s", 0.5)) + 0.2, goal=goal,
             stop_reason=stop_reason, unclean=metrics["unclean_stops"], recorded_odom=rec.tracked[:, 0].tolist(),
-            recorded_decisions=rec.primitives)
+            recorded_decisions=rec.primitives, recorded_pose_ages=rec.status[:, [0, 9]].tolist())
     metrics["recording"] = [str(f) for f in files]
     metrics["settings"] = {"planner": settings.as_dict(), "path": path_settings.as_dict(),
                            "start_pose": [x0, y0, h0], "real_time_factor": args.real_time_factor,

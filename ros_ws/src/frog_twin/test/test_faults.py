@@ -7,7 +7,7 @@ import pytest
 
 from frog_twin.core.faults import (
     CAMPAIGN_FAULTS, FAULT_CLASSES, Fault, FaultSpecError, Observed, campaign_plan, check_against_graph,
-    content_time, outcome, parse_faults, recorder_losses, recovery_time, stale_firings)
+    content_time, outcome, parse_faults, recorder_losses, recovery_time, restart_windows, stale_firings)
 
 
 def test_spec_round_trips_through_labels_and_sorts_by_time():
@@ -161,6 +161,40 @@ def test_old_command_verdicts_inside_a_blind_interval_are_unverified_not_stale()
     # it saw an I there (which fires nothing): the firing is still the 5 s old command's
     bad = stale_firings(obs, [], 3.0, 0.7, witness_decisions=[(5.98, "I")])
     assert [(b["fired"], b["decided"]) for b in bad] == [(6.0, 1.0)]
+
+
+def test_restart_windows_end_a_discovery_after_the_first_message_after_each_restart():
+    assert restart_windows([10.43], [9.133, 13.833, 13.866], 3.0) == [(10.43, 13.833 + 3.0)]
+    assert restart_windows([2.0, 10.0], [1.0, 2.5, 12.0], 3.0) == [(2.0, 5.5), (10.0, 15.0)]
+    assert restart_windows([5.0], [1.0, 4.9], 3.0) == [(5.0, math.inf)]     # nothing after it: blind to the end
+    assert restart_windows([], [1.0], 3.0) == []
+
+
+def test_a_pose_no_witness_saw_after_a_tracker_restart_is_unverified_only_as_the_planner_reports_it():
+    """The campaign's kill:tracker_node@7.1 (line, seed 1): odometry seen by the watch and the recording
+    until 9.13 s, the restarted tracker's from 13.83 s; the planner matched it earlier and decided at
+    12.87 s on a pose it reports 0.037 s old. Without a restart, or with the planner itself reporting
+    an old pose, the same firing is stale."""
+    odom = [i / 30 for i in range(274)] + [13.833 + i / 30 for i in range(150)]
+    obs = Observed(odom=odom, decisions=[(11.44, "B"), (12.87, "B")], fired=[11.45, 12.88, 12.96])
+    stale = stale_firings(obs, [], 3.56, 0.7)
+    assert [b["fired"] for b in stale] == [12.88, 12.96] and not any(b["unverified"] for b in stale)
+    blind = [(10.43, 13.833 + 3.0)]
+    ok = {12.87: 0.037, 11.44: 2.307}
+    bad = stale_firings(obs, [], 3.56, 0.7, odom_blind=blind, reported_pose_age=ok)
+    assert [(b["fired"], b["unverified"]) for b in bad] == [(12.88, True), (12.96, True)]
+    # the planner reports the old pose itself: stale, restart or not
+    old = {12.87: 3.74}
+    assert not any(b["unverified"] for b in stale_firings(obs, [], 3.56, 0.7, odom_blind=blind,
+                                                           reported_pose_age=old))
+    # no status for the decision, or a decision outside the restart's window: stale
+    assert not any(b["unverified"] for b in stale_firings(obs, [], 3.56, 0.7, odom_blind=blind))
+    assert not any(b["unverified"] for b in stale_firings(obs, [], 3.56, 0.7, odom_blind=[(1.0, 5.0)],
+                                                           reported_pose_age=ok))
+    # a command that fires late is stale whatever the planner says of its pose
+    late = Observed(odom=odom, decisions=[(12.87, "B")], fired=[14.0])
+    assert not any(b["unverified"] for b in stale_firings(late, [], 3.56, 0.7, odom_blind=blind,
+                                                           reported_pose_age=ok))
 
 
 def test_a_firing_stamped_just_before_its_decision_is_that_decision_s():

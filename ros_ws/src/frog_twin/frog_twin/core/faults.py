@@ -191,10 +191,21 @@ class Observed:
     decisions: list = field(default_factory=list)     # (stamp, primitive name) of frog/primitive
     fired: list = field(default_factory=list)         # stamps of frog/limb_activation (the robot fired)
     status: list = field(default_factory=list)        # (stamp, state) of frog/planner/status
+    pose_ages: list = field(default_factory=list)     # (stamp, pose_age) of frog/planner/status
     # arrival order at the observer (one counter for both lists; empty = order by stamps): the
     # causal order, where stamps from two nodes' clocks can disagree by a few hundred ms under load
     decision_seq: list = field(default_factory=list)
     fired_seq: list = field(default_factory=list)
+
+
+def restart_windows(restarts, stamps, discovery: float) -> list:
+    """[(t0, t1)]: from each restart time t0 to ``discovery`` s after the first of ``stamps`` after it
+    (inf if none): how long a subscriber may not have matched a restarted publisher yet."""
+    out = []
+    for t0 in restarts:
+        later = [t for t in stamps if t > t0]
+        out.append((t0, (min(later) if later else float("inf")) + discovery))
+    return out
 
 
 def content_time(stamp: float, faults) -> float:
@@ -217,7 +228,7 @@ CLOCK_SKEW_S = 0.05
 
 
 def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float, blind=(),
-                  witness_odom=(), witness_decisions=()) -> list[dict]:
+                  witness_odom=(), witness_decisions=(), odom_blind=(), reported_pose_age=None) -> list[dict]:
     """Limb firings on state older than the bounds: one dict per offending firing.
 
     A firing comes from the last non-I primitive the observer received before it (arrival
@@ -232,7 +243,13 @@ def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float
     its own odometry alone made a kick on a 0.2 s old pose look 5 s old.
     ``witness_decisions``: (stamp, name) of primitives another subscriber saw (the recording),
     for the decisions of a restarted planner the observer has not matched yet.
+    ``odom_blind``: intervals in which neither witness may have matched a restarted tracker's
+    odometry publisher yet (the planner can match it seconds earlier); a stale-pose verdict on
+    a decision inside one, whose status reports (``reported_pose_age``: {decision stamp: the
+    planner's ``pose_age``}) a pose within the bound, is ``unverified``: no witness saw that
+    pose, and none saw its absence.
     """
+    reported = reported_pose_age or {}
     odom = sorted(set(obs.odom) | set(witness_odom))
     stamps = sorted({t for t, n in (*obs.decisions, *witness_decisions) if n != "I"})
     by_arrival = len(obs.decision_seq) == len(obs.decisions) and len(obs.fired_seq) == len(obs.fired) \
@@ -268,7 +285,12 @@ def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float
         # the firing's stamp is the robot's clock, the decision's the planner's: under load the
         # robot's can trail by a few hundred ms, so a negative age is a 0 age
         if pose_age > pose_bound or t - t_d > command_bound:
-            unseen = pose_age <= pose_bound and any(a <= t <= b for a, b in blind)
+            if pose_age <= pose_bound:      # an old command: verified unless the decisions were unseen
+                unseen = any(a <= t <= b for a, b in blind)
+            else:                           # an old pose: verified unless the odometry was unseen
+                claim = reported.get(round(t_d, 6))
+                unseen = (t - t_d <= command_bound and claim is not None and claim <= pose_bound
+                          and any(a <= t_d <= b for a, b in odom_blind))
             bad.append({"fired": t, "decided": t_d, "pose_age": pose_age, "command_age": t - t_d,
                         "unverified": unseen})
     return bad
@@ -335,15 +357,18 @@ def outcome(goal: bool, stop_reason, stale: int, lost: int, unclean) -> str:
 
 def fault_report(faults, observer, sim_start: float, injector, recorded: dict, pose_bound: float,
                  command_bound: float, goal: bool, stop_reason, unclean, recorded_odom=(),
-                 recorded_decisions=()) -> dict:
+                 recorded_decisions=(), recorded_pose_ages=()) -> dict:
     """The fault section of a run's metrics: outcome, stale firings, recorder losses, recovery.
 
     ``recorded_odom``, ``recorded_decisions``: the recording's odometry stamps and (stamp,
-    primitive name), a second witness of what existed."""
+    primitive name), a second witness of what existed; ``recorded_pose_ages``: (stamp,
+    pose_age) of the recorded planner statuses, what the planner reports of its pose."""
     obs = observer.obs
     shifted = [replace(f, at=f.at + sim_start) for f in faults]
+    reported = {round(t, 6): a for t, a in (*obs.pose_ages, *recorded_pose_ages) if math.isfinite(a)}
     flagged = stale_firings(obs, shifted, pose_bound, command_bound, blind=observer.planner_blind(),
-                            witness_odom=recorded_odom, witness_decisions=recorded_decisions)
+                            witness_odom=recorded_odom, witness_decisions=recorded_decisions,
+                            odom_blind=observer.odom_blind(recorded_odom), reported_pose_age=reported)
     stale = [b for b in flagged if not b.get("unverified")]
     unverified = [b for b in flagged if b.get("unverified")]
     gaps = observer.discovery_gaps()

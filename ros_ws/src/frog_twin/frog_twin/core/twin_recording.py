@@ -34,9 +34,9 @@ class TwinRecording:
 
     truth: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))     # t, x, y, heading
     tracked: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))   # t, x, y, heading
-    status: np.ndarray = field(default_factory=lambda: np.zeros((0, 9)))
+    status: np.ndarray = field(default_factory=lambda: np.zeros((0, 10)))
     # status columns: t, primitive id, total cost, cost distance, heading, progress, path progress,
-    # distance to path, state
+    # distance to path, state, pose age
     primitives: list = field(default_factory=list)   # (t, name)
     sent: list = field(default_factory=list)         # (t, limbs)
     fired: list = field(default_factory=list)        # (t, limbs)
@@ -62,7 +62,7 @@ def read_twin_recording(mcap_files, with_images: bool = True) -> TwinRecording:
                 tracked.append([_t(m.header.stamp), p.x, p.y, yaw_of(m.pose.pose.orientation)])
             elif topic == TOPICS["status"]:
                 status.append([_t(m.header.stamp), m.primitive_id, m.total_cost, m.cost_distance, m.cost_heading,
-                               m.cost_progress, m.path_progress, m.distance_to_path, m.state])
+                               m.cost_progress, m.path_progress, m.distance_to_path, m.state, m.pose_age])
             elif topic == TOPICS["primitive"]:
                 rec.primitives.append((_t(m.header.stamp), m.name))
             elif topic == TOPICS["sent"]:
@@ -82,7 +82,7 @@ def read_twin_recording(mcap_files, with_images: bool = True) -> TwinRecording:
                     key = (tr.header.frame_id, tr.child_frame_id)
                     rec.tf_frames[key] = rec.tf_frames.get(key, 0) + 1
     order = lambda rows, width: np.array(sorted(rows), dtype=float).reshape(-1, width)  # noqa: E731
-    rec.truth, rec.tracked, rec.status = order(truth, 4), order(tracked, 4), order(status, 9)
+    rec.truth, rec.tracked, rec.status = order(truth, 4), order(tracked, 4), order(status, 10)
     for name in ("primitives", "sent", "fired", "shapes", "preview"):
         getattr(rec, name).sort(key=lambda item: item[0])
     return rec
