@@ -69,22 +69,14 @@ from soft_robot_common.supervision import RestartPolicy, Supervisor
 
 from frog_twin.core import twin_report
 from frog_twin.core.faults import FaultSpecError, check_against_graph, fault_report, parse_faults
+# the realism defaults of the twin (each switchable; see --help)
+from frog_twin.core.realism import (HARDWARE_PERIOD_S, KICK_STRENGTH_SD, LIMB_STRENGTH_SD, YAW_DISTURBANCE_SD,
+                                    YAW_DISTURBANCE_TAU_S)
 from frog_twin.core.twin_recording import (read_twin_recording, readable_files, recorded_stamps, recordings,
                                             run_files)
 from frog_twin.fault_injection import CHECKED_TOPICS, FaultInjector, RunObserver
 
 PATH_NAMES = ("line", "sine", "ellipse")
-
-#: Realism defaults of the twin (each switchable; see --help).
-HARDWARE_PERIOD_S = 1.43     # decision period measured in the authors' closed-loop logs
-LIMB_STRENGTH_SD = 0.1       # relative spread of the four limbs' kick strengths (real limbs differ)
-# The robot's heading per period varies about the model's (4.3 deg sd, correlated over 1-2
-# periods): a slowly varying yaw torque (frog_sim.core.yaw_disturbance) and a small
-# per-firing kick spread, identified jointly on the hardware runs' residual autocovariance
-# by `frog-sim disturbance` (runs/disturbance; frog_twin test_kick_variability.py checks them)
-KICK_STRENGTH_SD = 0.05
-YAW_DISTURBANCE_SD = 9.2e-5    # [N m]
-YAW_DISTURBANCE_TAU_S = 1.25
 
 #: The paths run along the tank's +y, the long side of the overhead camera's view
 #: (frog_vision's default camera: 0.8 m above the origin, image right = tank +y), centred on

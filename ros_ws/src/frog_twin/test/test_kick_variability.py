@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from frog_twin.twin import KICK_STRENGTH_SD, LIMB_STRENGTH_SD, YAW_DISTURBANCE_SD, YAW_DISTURBANCE_TAU_S
+from frog_twin.core.realism import KICK_STRENGTH_SD, YAW_DISTURBANCE_SD, YAW_DISTURBANCE_TAU_S, Realism
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +52,6 @@ def test_residual_autocovariance_matches_the_robot(windows):
 
 def test_b_heading_wander_matches_the_robot(windows):
     from frog_sim import multi_period as mp
-    from frog_common.primitives import LIMB_NAMES
     from frog_sim.core.simulation import FrogSimulation
     b = [w for w in windows if w.primitives[0] == "B"]
     assert len(b) >= 15
@@ -61,11 +60,7 @@ def test_b_heading_wander_matches_the_robot(windows):
     varied = []
     for seed in range(6):                     # six runs of the twin: limbs drawn as sim_node does
         sim = FrogSimulation()
-        rng = np.random.default_rng(seed)
-        factors = np.clip(1.0 + LIMB_STRENGTH_SD * rng.standard_normal(len(LIMB_NAMES)), 0.2, 2.0)
-        sim.set_limb_strength(dict(zip(LIMB_NAMES, factors.tolist())))
-        sim.set_kick_variability(KICK_STRENGTH_SD, seed=seed + 1)
-        sim.set_yaw_disturbance(YAW_DISTURBANCE_SD, YAW_DISTURBANCE_TAU_S, seed=seed + 2)
+        Realism(seed).apply(sim)
         varied.append(mp.heading_wander(sim, b, draws=2)[1])
     assert equal < 0.5 * real
     assert float(np.mean(varied)) == pytest.approx(real, rel=0.3), (real, equal, varied)

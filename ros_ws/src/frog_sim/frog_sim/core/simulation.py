@@ -230,6 +230,26 @@ class FrogSimulation:
         """Kick strength factor of each limb (1 = nominal)."""
         return {l: float(getattr(self, '_limb_strength', {}).get(l, 1.0)) for l in LIMB_NAMES}
 
+    def set_realism(self, seed: int, limb_strength_sd: float = 0.0, kick_strength_sd: float = 0.0,
+                    yaw_disturbance_sd: float = 0.0, yaw_disturbance_tau: float = 2.0) -> dict:
+        """The digital twin's robot-to-robot and kick-to-kick variation, drawn from ``seed``.
+
+        Each limb's strength from N(1, ``limb_strength_sd``^2) (clipped to 0.2-2;
+        :meth:`set_limb_strength`), each firing's spread (:meth:`set_kick_variability`, seed
+        + 1) and the tank's yaw torque (:meth:`set_yaw_disturbance`, seed + 2). The same seed
+        and spreads make the same robot wherever it is simulated (``sim_node``, the in-process
+        evaluator). A spread of 0 leaves that part nominal. Returns the limb strengths.
+        """
+        if limb_strength_sd > 0:
+            rng = np.random.default_rng(seed)
+            factors = np.clip(1.0 + limb_strength_sd * rng.standard_normal(len(LIMB_NAMES)), 0.2, 2.0)
+            self.set_limb_strength(dict(zip(LIMB_NAMES, factors.tolist())))
+        if kick_strength_sd > 0:
+            self.set_kick_variability(kick_strength_sd, seed=seed + 1)
+        if yaw_disturbance_sd > 0:
+            self.set_yaw_disturbance(yaw_disturbance_sd, yaw_disturbance_tau, seed=seed + 2)
+        return self.limb_strength
+
     def set_kick_variability(self, sd: float, seed: int | None = None) -> None:
         """Let every firing vary: each limb fired by :meth:`fire_limbs` or :meth:`execute_primitive`
         kicks with its strength times an independent factor ``N(1, sd)`` (clipped to 0.2-2).

@@ -20,7 +20,6 @@ import math
 import sys
 import time
 
-import numpy as np
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -101,14 +100,8 @@ class SimNode(Node):
             params = FrogParameters(**model)
             self.sim = FrogSimulation(params, time_step=p["time_step"])
             self.sim.set_pose(p["initial_x"], p["initial_y"], p["initial_heading"])
-            if p["limb_strength_sd"] > 0:
-                rng = np.random.default_rng(p["seed"])
-                factors = np.clip(1.0 + p["limb_strength_sd"] * rng.standard_normal(len(LIMB_NAMES)), 0.2, 2.0)
-                self.sim.set_limb_strength(dict(zip(LIMB_NAMES, factors.tolist())))
-            if p["kick_strength_sd"] > 0:
-                self.sim.set_kick_variability(p["kick_strength_sd"], seed=p["seed"] + 1)
-            if p["yaw_disturbance_sd"] > 0:
-                self.sim.set_yaw_disturbance(p["yaw_disturbance_sd"], p["yaw_disturbance_tau_s"], seed=p["seed"] + 2)
+            self.sim.set_realism(p["seed"], p["limb_strength_sd"], p["kick_strength_sd"], p["yaw_disturbance_sd"],
+                                 p["yaw_disturbance_tau_s"])
             if p["gait_frequency_hz"] > 0:
                 self.sim.set_gait(p["gait_frequency_hz"], p["gait_phase_offset"],
                                   duration=p["gait_duration_s"] or None)
