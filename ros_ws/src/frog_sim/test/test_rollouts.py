@@ -185,6 +185,30 @@ def test_depth_two_reuses_the_first_periods_and_threads_agree(rollouts):
     assert later.pose[0, 0] == pytest.approx(res.pose[seqs.index(("C", "H")), 1], abs=1e-9)
 
 
+def test_a_decision_tree_coasts_the_lead_then_chains_each_period_from_the_last(rollouts):
+    """decision_tree's rows against FrogSimulation.step driven with the same plan: the lead coasted
+    with nothing fired, then each sequence; level 1 seen from the decision's pose (before the
+    lead), level 2 from its parent's end; a beam leaves the other first primitives NaN."""
+    start = rollouts.estimated_start(POSE, TWIST, FIRED)
+    lead = 0.6
+    rows, result = rollouts.decision_tree(start, PERIOD, depth=2, lead=lead, first_primitives=("C", "B"))
+    assert rows.shape == (9 + 81, 6) and len(result.sequences) == 18
+    names = "ABCDEFGHI"
+    coast = rollouts.rollout_batch(start, [("I",)], period=lead).ends[("I",)]
+    for first, second in (("B", "E"), ("C", "C")):
+        plan = rollouts.step_plan(coast, (first, second), PERIOD)
+        (one, _), (two, _) = reference(coast, (first, second), PERIOD, plan, force_tolerance=1e-4)
+        lvl1 = rows[names.index(first)]
+        lvl2 = rows[9 + 9 * names.index(first) + names.index(second)]
+        np.testing.assert_allclose(lvl1, body_frame(np.asarray(POSE), one), atol=2e-6)
+        parent = np.array([*one.com, one.heading])
+        np.testing.assert_allclose(lvl2, body_frame(parent, two), atol=2e-6)
+    outside = [i for i, n in enumerate(names) if n not in "BC"]
+    assert np.isnan(rows[outside]).all() and np.isfinite(rows[[1, 2]]).all()
+    with pytest.raises(ValueError, match="lead"):
+        rollouts.decision_tree(start, PERIOD, lead=-0.1)
+
+
 def test_a_failed_fast_step_is_redone_as_frog_simulation_does():
     """With 3 Newton iterations the kick's fast steps fail: the job is redone with the
     integrator's step halving, and matches FrogSimulation (same limit) step for step."""

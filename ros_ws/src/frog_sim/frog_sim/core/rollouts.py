@@ -39,6 +39,7 @@ numba's cache checks only this file for :func:`_run_jobs`: after editing a kerne
 """
 from __future__ import annotations
 
+import itertools
 import math
 import os
 from collections import namedtuple
@@ -53,11 +54,11 @@ from numba.extending import intrinsic
 from .integrator import STATUS_OK, run_direct
 from .model_parameters import FrogParameters
 from .rigid_body import center_of_mass, heading_angle, nodal_velocities, yaw_rate
-from frog_common.primitives import LIMB_IDS, LIMB_NAMES, primitive_limbs, primitive_name
+from frog_common.primitives import LIMB_IDS, LIMB_NAMES, PRIMITIVE_NAMES, primitive_limbs, primitive_name
 from .simulation import DEFAULT_TIME_STEP, FrogSimulation
 from frog_common.se2 import wrap_angle
 
-__all__ = ['Rollouts', 'RolloutStart', 'RolloutResult']
+__all__ = ['Rollouts', 'RolloutStart', 'RolloutResult', 'tree_rows']
 
 #: Newton force tolerance of the rollouts [N]: 100x the simulator's 1e-6 N, ~0.5 fewer
 #: Newton iterations per step; it moves 1.43 s end poses by < 0.01 mm and < 0.1 deg
@@ -575,6 +576,40 @@ class Rollouts:
         return RolloutResult(sequences=seqs, transitions=transitions, pose=poses, converged=converged, ends=ends,
                              stats=stats)
 
+    def decision_tree(self, start: RolloutStart, period: float, depth: int = 1, lead: float = 0.0,
+                      first_primitives=()) -> tuple[np.ndarray, RolloutResult]:
+        """A planner decision's tree: coast ``lead`` [s] from ``start`` (nothing fired, limbs
+        relaxing: where the robot will be when the decision fires), then every sequence of
+        ``depth`` primitives, one per ``period`` (only those starting with one of
+        ``first_primitives``, if given: a beam).
+
+        Returns
+        -------
+        rows : ndarray, shape (P + ... + P^depth, 6)
+            :func:`tree_rows` from ``start.pose`` (before the lead): what the planner chains by
+            eq. 18 (frog_planner ``tree_from_rows``), NaN where not simulated.
+        result : RolloutResult
+            The rollouts after the lead.
+
+        Raises
+        ------
+        ValueError
+            For a bad period, lead or primitive, or a lead coast that did not converge.
+        """
+        if not (np.isfinite(lead) and 0.0 <= lead <= 5.0):
+            raise ValueError(f'lead = {lead!r} s must be in [0, 5]')
+        if not 1 <= int(depth) <= 5:
+            raise ValueError(f'depth = {depth!r} must be in 1-5')
+        firsts = {primitive_name(p) for p in first_primitives}
+        origin = start.pose
+        if lead > 0:
+            start = self.rollout_batch(start, [('I',)], period=float(lead)).ends.get(('I',))
+            if start is None:
+                raise ValueError(f'the {lead:.3f} s coast before the decision did not converge')
+        seqs = [s for s in itertools.product(PRIMITIVE_NAMES, repeat=int(depth)) if not firsts or s[0] in firsts]
+        result = self.rollout_batch(start, seqs, period=period)
+        return tree_rows(result, origin, int(depth)), result
+
     def _run_wave(self, batch, done, stats):
         """Jobs whose parents are done, in one :func:`_run_jobs` call per thread; their ends."""
         n_jobs, ndof = len(batch), self._zero_force.size
@@ -685,6 +720,30 @@ class Rollouts:
         vc = center_of_mass(vel, mass)
         c, s = math.cos(heading), math.sin(heading)
         return np.array([c * vc[0] + s * vc[1], -s * vc[0] + c * vc[1], yaw_rate(pos, vel, mass)])
+
+
+def tree_rows(result: RolloutResult, start_pose, depth: int, names=PRIMITIVE_NAMES) -> np.ndarray:
+    """Rows of 6 level by level (P^d rows at level d, base-P order), each in its own period's start frame.
+
+    The planner chains one period at a time (eq. 18): a row of level d is the end of period
+    d (``result.ends`` of the prefix) seen from the end of period d - 1, level 1 from
+    ``start_pose`` (the decision's pose, before any lead): dx, dy [m] and dyaw [rad] in that
+    frame, then u, v [m/s], w [rad/s] at the end (the motion library's layout). Prefixes that
+    were not simulated (outside a beam, or not converged) give NaN rows.
+    """
+    rows = []
+    for d in range(1, depth + 1):
+        for prefix in itertools.product(names, repeat=d):
+            end = result.ends.get(prefix)
+            parent = result.ends.get(prefix[:-1]) if d > 1 else None
+            base = np.asarray(start_pose, dtype=float) if d == 1 else (parent.pose if parent else None)
+            if end is None or base is None:
+                rows.append(np.full(6, np.nan))
+                continue
+            c, s = math.cos(base[2]), math.sin(base[2])
+            dx, dy = end.pose[0] - base[0], end.pose[1] - base[1]
+            rows.append(np.array([c * dx + s * dy, -s * dx + c * dy, end.pose[2] - base[2], *end.twist]))
+    return np.array(rows)
 
 
 def _finite_vector(value, name, size) -> np.ndarray:

@@ -17,7 +17,6 @@ it fires; ``first_primitives`` restricts depth 2 to a beam (the other rows are N
 
 from __future__ import annotations
 
-import itertools
 import math
 import sys
 import time
@@ -41,29 +40,6 @@ PARAMS = [
     Param("kick_window", KICK_WINDOW, "fine steps for this long after each firing [s]", min=0.0, max=5.0),
     Param("force_tolerance", ROLLOUT_FORCE_TOLERANCE, "Newton residual tolerance [N]", min=1e-9, max=1e-2),
 ]
-
-
-def tree_transitions(result, start_pose, depth: int, names) -> np.ndarray:
-    """Rows of 6 level by level (P^d rows at level d, base-P order), each in its own period's start frame.
-
-    The planner chains one period at a time (eq. 18): a row of level d is the end of period
-    d (``result.ends`` of the prefix) seen from the end of period d - 1, level 1 from
-    ``start_pose`` (the request's pose, before any lead). Prefixes that were not simulated
-    (outside a beam, or not converged) give NaN rows.
-    """
-    rows = []
-    for d in range(1, depth + 1):
-        for prefix in itertools.product(names, repeat=d):
-            end = result.ends.get(prefix)
-            parent = result.ends.get(prefix[:-1]) if d > 1 else None
-            base = np.asarray(start_pose, dtype=float) if d == 1 else (parent.pose if parent else None)
-            if end is None or base is None:
-                rows.append(np.full(6, np.nan))
-                continue
-            c, s = math.cos(base[2]), math.sin(base[2])
-            dx, dy = end.pose[0] - base[0], end.pose[1] - base[1]
-            rows.append(np.array([c * dx + s * dy, -s * dx + c * dy, end.pose[2] - base[2], *end.twist]))
-    return np.array(rows)
 
 
 class RolloutNode(Node):
@@ -135,24 +111,16 @@ class RolloutNode(Node):
         t0 = time.monotonic()
         try:
             start = self.rollouts.estimated_start(pose, twist, fired, now=0.0)
-            if request.lead > 0:     # where the robot will be when the decision fires
-                start = self.rollouts.rollout_batch(start, [("I",)], period=request.lead).ends.get(("I",))
-                if start is None:
-                    return self._refuse(response, f"the {request.lead:.3f} s coast before the decision did not "
-                                                  f"converge")
-            seqs = [s for s in itertools.product(PRIMITIVE_NAMES, repeat=request.depth)
-                    if not firsts or s[0] in firsts]
-            result = self.rollouts.rollout_batch(start, seqs, period=request.period)
+            rows, result = self.rollouts.decision_tree(start, request.period, request.depth, request.lead, firsts)
         except ValueError as exc:
             return self._refuse(response, str(exc))
-        rows = tree_transitions(result, pose, request.depth, PRIMITIVE_NAMES)
         self.last_compute = time.monotonic() - t0
         if not np.all(result.converged):
-            return self._refuse(response, f"{int(np.sum(~result.converged))} of {len(seqs)} rollouts did "
-                                          f"not converge")
+            return self._refuse(response, f"{int(np.sum(~result.converged))} of {len(result.sequences)} rollouts "
+                                          f"did not converge")
         response.success = True
         st = result.stats
-        response.message = (f"{len(seqs)} sequences, {st['jobs']} jobs, {st['steps']} steps in "
+        response.message = (f"{len(result.sequences)} sequences, {st['jobs']} jobs, {st['steps']} steps in "
                             f"{self.last_compute:.3f} s")
         response.primitive_names = list(PRIMITIVE_NAMES)
         response.transitions = rows.ravel().tolist()
