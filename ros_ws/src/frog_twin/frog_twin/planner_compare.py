@@ -112,26 +112,14 @@ def plot_path(path_name: str, path_points, tracks: list[tuple[str, np.ndarray]],
     plt.close(fig)
 
 
-def _cases(args):
-    """(name, path settings, start pose or None, period) of every compared path."""
-    from frog_twin.core import replay
-    from frog_twin.replay_cli import REPLAY_DURATION_FACTOR, REPLAY_EXTRA_S
-    from frog_twin.twin import PATH_NAMES, placed_path_settings
-    args.hardware_duration = {}
-    cases = [(name, placed_path_settings(args.path_settings, name), None, args.settings.period)
-             for name in (PATH_NAMES if args.compare_paths in (None, "all") else
-                          () if args.compare_paths == "none" else args.compare_paths.split(","))]
+def _cases(args) -> list:
+    """Every compared path (:mod:`frog_twin.core.cases`): the paper's, then the hardware runs'."""
+    from frog_twin.core.cases import PATH_NAMES, hardware_cases, paper_cases
+    names = (PATH_NAMES if args.compare_paths in (None, "all") else
+             () if args.compare_paths == "none" else args.compare_paths.split(","))
+    cases = paper_cases(args.path_settings, args.settings.period, names)
     if args.compare_runs is not None:
-        folder = args.out_folder / "paths"
-        folder.mkdir(parents=True, exist_ok=True)
-        for run_csv in sorted(Path(args.compare_runs).glob("*.csv")):
-            if run_csv.stem.endswith("_path"):
-                continue
-            setup = replay.replay_setup(run_csv, None)
-            waypoints = replay.write_waypoints(setup.path, folder / f"{setup.name}_waypoints.csv")
-            ps = dataclasses.replace(args.path_settings, path_type="waypoints", waypoint_file=str(waypoints))
-            cases.append((setup.name, ps, setup.start_pose, setup.period))
-            args.hardware_duration[setup.name] = REPLAY_DURATION_FACTOR * float(setup.time[-1]) + REPLAY_EXTRA_S
+        cases += hardware_cases(args.compare_runs, args.out_folder / "paths", args.path_settings)
     return cases
 
 
@@ -144,11 +132,11 @@ def main_compare(args, root: Path) -> int:
     args.out_folder = out
     kinds = [k.strip() for k in args.compare_planners.split(",")]
     cases = _cases(args)
-    hardware_duration = args.hardware_duration
     seeds = list(range(args.seed, args.seed + args.seeds))
     total, done = len(cases) * len(kinds) * len(seeds), 0
     results = []
-    for name, path_settings, start, period in cases:
+    for case in cases:
+        name, path_settings, start, period = case.name, case.path_settings, case.start_pose, case.period
         tracks, points = [], None
         for kind in kinds:
             settings, transitions = planner_settings(kind, args.settings, period)
@@ -162,7 +150,7 @@ def main_compare(args, root: Path) -> int:
                 label = f"{name}_{kind}_s{seed}"
                 print(f"[{done}/{total}] {label}: depth {settings.depth}, transitions {transitions}, "
                       f"period {period:.3f} s", flush=True)
-                duration = args.duration if start is None else (args.duration or hardware_duration[name])
+                duration = args.duration if case.duration is None else (args.duration or case.duration)
                 rec, m = run_twin(a, label, out / name / label, path_settings, start, settings, duration)
                 sim_n, fallbacks = _decision_counts(out / name / label)
                 t0 = m["start_time_s"]

@@ -27,11 +27,9 @@ import numpy as np
 from frog_planner.core.settings import PathSettings, PlannerSettings, from_arguments
 
 from frog_twin.core import replay
+# simulated time allowed per replay when --duration is not given
+from frog_twin.core.cases import REPLAY_DURATION_FACTOR, REPLAY_EXTRA_S
 
-#: Simulated time allowed per replay when --duration is not given: this many times the real
-#: run's duration, plus REPLAY_EXTRA_S.
-REPLAY_DURATION_FACTOR = 2.0
-REPLAY_EXTRA_S = 15.0
 #: The authors' planner loop (their published control code, softmachineslab/frog control_code/src):
 #: it decided on the mean of the 9 tracker states it polled since its last decision, about
 #: 9 x 0.07 s of frames (its share of the tracking loop, as the logger's), and an executor sent

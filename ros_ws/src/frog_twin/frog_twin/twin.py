@@ -53,7 +53,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -68,6 +67,7 @@ from soft_robot_common.tool_signals import stop_on_signals
 from soft_robot_common.supervision import RestartPolicy, Supervisor
 
 from frog_twin.core import twin_report
+from frog_twin.core.cases import PATH_NAMES, path_start_pose, placed_path_settings
 from frog_twin.core.faults import FaultSpecError, check_against_graph, fault_report, parse_faults
 # the realism defaults of the twin (each switchable; see --help)
 from frog_twin.core.realism import (HARDWARE_PERIOD_S, KICK_STRENGTH_SD, LIMB_STRENGTH_SD, YAW_DISTURBANCE_SD,
@@ -75,25 +75,6 @@ from frog_twin.core.realism import (HARDWARE_PERIOD_S, KICK_STRENGTH_SD, LIMB_ST
 from frog_twin.core.twin_recording import (read_twin_recording, readable_files, recorded_stamps, recordings,
                                             run_files)
 from frog_twin.fault_injection import CHECKED_TOPICS, FaultInjector, RunObserver
-
-PATH_NAMES = ("line", "sine", "ellipse")
-
-#: The paths run along the tank's +y, the long side of the overhead camera's view
-#: (frog_vision's default camera: 0.8 m above the origin, image right = tank +y), centred on
-#: the view so the robot stays in the picture.
-PATH_HEADING = math.pi / 2
-
-
-def placed_path_settings(path_settings, name: str):
-    """``path_settings`` for path ``name``, rotated to PATH_HEADING and centred on the tank origin."""
-    import dataclasses
-
-    local = dataclasses.replace(path_settings, path_type=name, path_start_x=0.0, path_start_y=0.0,
-                                path_heading=PATH_HEADING)
-    pts = local.build().points
-    centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
-    return dataclasses.replace(local, path_start_x=float(-centre[0]), path_start_y=float(-centre[1]))
-
 
 def repo_root() -> Path:
     """The repository (for runs/); the current folder when installed elsewhere."""
@@ -291,13 +272,6 @@ def twin_report_faults(rep: dict) -> str:
     return "\n".join(lines)
 
 
-def _path_start_pose(args, path_settings):
-    path = path_settings.build()
-    h0 = float(path.tangent_headings[0])
-    x0 = path.points[0] + args.lateral_offset * __import__("numpy").array([-math.sin(h0), math.cos(h0)])
-    return float(x0[0]), float(x0[1]), h0
-
-
 def run_path(args, name: str, out: Path, path_settings=None, start_pose=None, settings=None, duration=None,
              faults=()) -> dict:
     """One closed-loop run of the twin on path ``name``; returns its metrics (see :func:`run_twin`)."""
@@ -323,7 +297,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
               f"not read", flush=True)
     path_settings = path_settings or placed_path_settings(args.path_settings, name)
     settings = settings or args.settings
-    x0, y0, h0 = start_pose or _path_start_pose(args, path_settings)
+    x0, y0, h0 = start_pose or path_start_pose(path_settings, args.lateral_offset)
     graph = twin_graph(args, name, out, path_settings, settings, (x0, y0, h0))
     if faults:
         check_against_graph(faults, graph.names())
@@ -540,7 +514,7 @@ def print_graph(args) -> int:
     try:
         if mode == "sim":
             graph = twin_graph(args, args.path, out / args.path, path_settings, args.settings,
-                               _path_start_pose(args, path_settings))
+                               path_start_pose(path_settings, args.lateral_offset))
         else:
             from frog_twin.real import real_graph
             graph = real_graph(args, args.path, out / args.path, path_settings, args.settings)
