@@ -95,23 +95,55 @@ def test_follows_a_right_hand_arc(library):
     assert right > left, used       # right-turning primitives (C, E, G) carry a right-hand arc
 
 
-def test_simulator_transitions_predict_the_next_pose_exactly(library):
-    """With ``transitions='simulator'`` the search runs each primitive on a copy of the
-    running simulator, so the pose it predicts for the chosen primitive must be the pose the
-    robot then reaches, to round-off (the simulator is deterministic); the library's
-    prediction of the same step is only approximate (it ignores the limbs' state)."""
+def test_simulator_transitions_from_the_full_state_predict_the_next_pose_exactly(library):
+    """Rollouts from the simulator's full state with its own steps and tolerance (uniform 2 ms,
+    1e-6 N) are the trajectory ``FrogSimulation.step`` computes, so the pose the search predicts
+    for the chosen primitive is the pose the robot then reaches, to the Newton tolerance
+    (the world is the nominal robot: no limb spread, no disturbance)."""
+    from frog_sim.core.rollouts import Rollouts
+    from frog_twin.core.evaluation import SimulatorTransitions
     model = TransitionModel.load(library, period=PERIOD, gradient_correction=True)
     path = line_path(length=0.30)
-    res = run_closed_loop(path, model, PlannerSettings(period=PERIOD), max_time=4.0, transitions="simulator",
-                          start_offset=(0.0, 0.02, 0.0), sample_interval=PERIOD)
+    with Rollouts(coast_time_step=0.002, force_tolerance=1e-6, threads=1) as ro:
+        res = run_closed_loop(path, model, PlannerSettings(period=PERIOD), max_time=4.0, transitions="simulator",
+                              simulator=SimulatorTransitions(ro, start="exact"), start_offset=(0.0, 0.02, 0.0),
+                              sample_interval=PERIOD)
     assert len(res.decisions) >= 3
-    assert res.metrics["transitions"] == "simulator" and res.metrics["metric"] == "exact"
+    assert res.metrics["transitions"] == "simulator" and res.metrics["metric"] == "simulator-exact"
     for k, dec in enumerate(res.decisions[:-1]):
         reached = res.pose[k + 1]
-        assert np.abs(np.asarray(dec["predicted_pose"]) - reached).max() < 1e-9, (k, dec["predicted_pose"], reached)
+        assert np.abs(np.asarray(dec["predicted_pose"]) - reached).max() < 1e-7, (k, dec["predicted_pose"], reached)
     with pytest.raises(ValueError, match="depth 1-2"):
         run_closed_loop(path, model, PlannerSettings(depth=3, period=PERIOD), max_time=2.0,
                         transitions="simulator")
+
+
+def test_simulator_transitions_from_the_estimate_and_a_lead(library):
+    """From what a robot knows (pose, twist, firing times), with the decision executed 1 s after
+    its observation (planner_node's deadline): each decision's predicted pose, one period after
+    the execution, is where the nominal robot then is, within what the estimate leaves out (the
+    limbs' own motion: bench/planner_rollouts.py, < 1 mm and 1 deg one period on), and the run
+    executes at the observation + lead (the decision times are the period's multiples)."""
+    from frog_sim.core.rollouts import Rollouts
+    from frog_twin.core.evaluation import SimulatorTransitions
+    model = TransitionModel.load(library, period=PERIOD, gradient_correction=True)
+    path = line_path(length=0.30)
+    with Rollouts(threads=1) as ro:
+        res = run_closed_loop(path, model, PlannerSettings(period=PERIOD), max_time=6.5, transitions="simulator",
+                              simulator=SimulatorTransitions(ro, lead=1.0), start_offset=(0.0, 0.02, 0.0),
+                              sample_interval=0.5)
+    assert res.metrics["lead_s"] == 1.0 and res.metrics["metric"] == "simulator-estimated"
+    times = [d["time"] for d in res.decisions]
+    assert times == pytest.approx([k * PERIOD for k in range(len(times))])
+    for dec in res.decisions[:-1]:
+        at = dec["time"] + 1.0 + PERIOD                       # executed after the lead, one period on
+        k = int(np.argmin(np.abs(res.time - at)))
+        assert res.time[k] == pytest.approx(at, abs=1e-6)
+        err = np.asarray(dec["predicted_pose"]) - res.pose[k]
+        assert np.hypot(*err[:2]) < 1e-3 and abs(err[2]) < math.radians(1.0), (dec["time"], err)
+    with pytest.raises(ValueError, match="shorter than the period"):
+        run_closed_loop(path, model, PlannerSettings(period=PERIOD), max_time=2.0, transitions="simulator",
+                        simulator=SimulatorTransitions(ro, lead=PERIOD))
 
 
 def test_turning_response_mirrors_and_matches_its_own_track():

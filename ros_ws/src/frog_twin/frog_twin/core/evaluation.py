@@ -8,8 +8,6 @@ primitive, and the simulator executes it for T seconds.
 
 from __future__ import annotations
 
-import copy
-import itertools
 import json
 import time
 from collections import Counter
@@ -19,57 +17,82 @@ from typing import Optional
 
 import numpy as np
 
-from frog_common.primitives import primitive_name
+from frog_common.primitives import LIMB_NAMES, primitive_name
 from frog_planner.core.paths import Path, ellipse_path, line_path, sinusoid_path
 from frog_planner.core.planner import Planner
 from frog_planner.core.settings import PlannerSettings
 from frog_planner.core.transition_model import TransitionModel
+from frog_planner.core.tree_search import tree_from_rows
 
 from .metrics import samples_before_finish  # noqa: F401  (re-exported for callers of this module)
+from .realism import Realism
 
 PATHS = {"line": line_path, "sine": sinusoid_path, "ellipse": ellipse_path}
 
 #: Where the search's predictions come from: the motion library (the paper) or the simulator.
 TRANSITION_SOURCES = ("library", "simulator")
+#: What the simulator's rollouts start from: the robot's estimate (tracked pose, body twist and
+#: the limbs' firing times: what planner_node sends rollout_node) or the simulator's full state
+#: (limb shapes and node velocities included: exact for the nominal robot).
+ROLLOUT_STARTS = ("estimated", "exact")
 
 #: Deepest tree the simulator source expands (9^2 = 81 simulated periods per decision).
 MAX_SIMULATOR_DEPTH = 2
 
 
-def simulator_expander(sim, period: float, n_primitives: int = 9):
-    """A tree expander that asks the simulator itself (the paper's suggested comparison,
-    "a planner that queries the DER simulation itself for transitions in the loop").
+def firing_times(sim) -> dict:
+    """Each limb's firings up to now on the simulator's clock (what ``frog/bridge/sent`` tells a robot)."""
+    fired = {}
+    for limb in LIMB_NAMES:
+        times = sim.schedule.times(limb)
+        times = times[times <= sim.time + 1e-12]
+        if times.size:
+            fired[limb] = float(times[-1])
+    return fired
 
-    Each sequence is run on a copy of ``sim`` in its *full* current state (limb shapes and
-    node velocities included), so the predictions are exact for this simulated robot: what
-    remains of a tracking error is the planner's cost and horizon, not the library.
 
-    Returns
-    -------
-    callable
-        ``expander(pose, body_velocity, depth)`` for :func:`frog_planner.core.tree_search.search`
-        (pose and velocity are ignored: the simulator's own state is used).
+class SimulatorTransitions:
+    """The search's predictions from batched rollouts of the simulator (``frog_sim`` :class:`Rollouts`),
+    as ``planner_node`` gets them from ``rollout_node`` with ``transitions: simulator``.
+
+    Parameters
+    ----------
+    rollouts : frog_sim.core.rollouts.Rollouts
+        The batched simulator (nominal model: a robot's limb strengths are not known to it).
+    start : {'estimated', 'exact'}
+        ``estimated``: the tree starts from the tracked pose, twist and firing times (what a
+        robot knows); ``exact``: from the simulator's full state.
+    lead : float
+        Seconds from the observation to the decision's execution (planner_node's
+        ``decision_deadline`` x period); the rollouts coast this long first.
+    beam : int
+        Depth 2: roll out only this many first primitives, best by the library (0: all).
     """
-    steps = int(round(period / sim.time_step))
 
-    def expander(pose, body_velocity, depth):
+    def __init__(self, rollouts, start: str = "estimated", lead: float = 0.0, beam: int = 0):
+        if start not in ROLLOUT_STARTS:
+            raise ValueError(f"rollout start {start!r} unknown; expected one of {ROLLOUT_STARTS}")
+        if not (np.isfinite(lead) and 0.0 <= lead <= 5.0):
+            raise ValueError(f"lead {lead!r} s must be in [0, 5]")
+        if not 0 <= int(beam) <= 9:
+            raise ValueError(f"beam {beam!r} must be in 0-9")
+        self.rollouts, self.start, self.lead, self.beam = rollouts, start, float(lead), int(beam)
+
+    def expander(self, sim, planner, pose, twist):
+        """The expander for :meth:`Planner.decide` at this instant of ``sim`` (observed ``pose``, ``twist``)."""
+        depth = planner.depth
         if not 1 <= depth <= MAX_SIMULATOR_DEPTH:
             raise ValueError(f"simulator transitions support depth 1-{MAX_SIMULATOR_DEPTH}, not {depth}")
-        leaves, velocities, first = [], [], {}
-        for seq in itertools.product(range(n_primitives), repeat=depth):
-            # share the (read-only) actuation library instead of copying it for every branch
-            branch = copy.deepcopy(sim, memo={id(sim.library): sim.library})
-            for level, prim in enumerate(seq):
-                branch.execute_primitive(prim)
-                branch.step(steps)
-                st = branch.rigid_body_state()
-                if level == 0 and prim not in first:
-                    first[prim] = [st.com[0], st.com[1], st.heading]
-            leaves.append([st.com[0], st.com[1], st.heading])
-            velocities.append([st.body_velocity[0], st.body_velocity[1], st.yaw_rate])
-        return (np.array(leaves), np.array([first[p] for p in range(n_primitives)]), np.array(velocities))
-
-    return expander
+        ro = self.rollouts
+        start = (ro.start_from_simulation(sim) if self.start == "exact"
+                 else ro.estimated_start(pose, twist, firing_times(sim), now=sim.time))
+        firsts = ()
+        if depth == 2 and 0 < self.beam < planner.model.n_primitives:
+            ranked = planner.rank_first_actions(pose, twist)
+            firsts = [planner.model.primitive_names[i] for i in ranked[:self.beam]]
+        rows, _ = ro.decision_tree(start, planner.settings.period, depth, self.lead, firsts)
+        n = planner.model.n_primitives
+        return lambda p, v, d: tree_from_rows(start.pose, rows, d, n)
 
 
 @dataclass
@@ -87,7 +110,8 @@ class ClosedLoopResult:
 def run_closed_loop(path: Path, model: TransitionModel, settings: PlannerSettings = PlannerSettings(),
                     max_time: Optional[float] = None, start_offset=(0.0, 0.0, 0.0),
                     sim_params: Optional[dict] = None, sample_interval: float = 0.05,
-                    simulation=None, transitions: str = "library") -> ClosedLoopResult:
+                    simulation=None, transitions: str = "library", simulator: Optional[SimulatorTransitions] = None,
+                    realism: Optional[Realism] = None, start_pose=None) -> ClosedLoopResult:
     """Follow ``path`` with the simulated frog until the goal or ``max_time``.
 
     Parameters
@@ -108,8 +132,16 @@ def run_closed_loop(path: Path, model: TransitionModel, settings: PlannerSetting
     simulation : FrogSimulation, optional
         Reuse a simulator (it is reset).
     transitions : {'library', 'simulator'}
-        Predictions of the search: the motion library (the paper) or exact ones from copies
-        of the running simulator (:func:`simulator_expander`; depth <= 2, slow).
+        Predictions of the search: the motion library (the paper) or the simulator's batched
+        rollouts (``simulator``; depth <= 2).
+    simulator : SimulatorTransitions, optional
+        How the rollouts start and how long they lead (default: the estimated start, no lead,
+        a one-thread :class:`Rollouts` on the nominal model).
+    realism : Realism, optional
+        Make the simulated robot the twin's robot of that seed (limb strengths, kick spread,
+        the tank's yaw torque); default the nominal robot.
+    start_pose : (float, float, float), optional
+        World start pose x, y [m], heading [rad] (instead of ``start_offset`` from the path's start).
 
     Returns
     -------
@@ -120,18 +152,28 @@ def run_closed_loop(path: Path, model: TransitionModel, settings: PlannerSetting
 
     sim = simulation or FrogSimulation(FrogParameters().replace(**(sim_params or {})))
     sim.reset()
-    h0 = float(path.tangent_headings[0])
-    c, s = np.cos(h0), np.sin(h0)
-    x0 = path.points[0] + start_offset[0] * np.array([c, s]) + start_offset[1] * np.array([-s, c])
-    sim.set_pose(float(x0[0]), float(x0[1]), h0 + start_offset[2])
+    if start_pose is None:
+        h0 = float(path.tangent_headings[0])
+        c, s = np.cos(h0), np.sin(h0)
+        x0 = path.points[0] + start_offset[0] * np.array([c, s]) + start_offset[1] * np.array([-s, c])
+        start_pose = (float(x0[0]), float(x0[1]), h0 + start_offset[2])
+    sim.set_pose(*(float(v) for v in start_pose))
+    limb_strength = realism.apply(sim) if realism is not None else sim.limb_strength
     if transitions not in TRANSITION_SOURCES:
         raise ValueError(f"transitions {transitions!r} unknown; expected one of {TRANSITION_SOURCES}")
+    if transitions == "simulator":
+        if not 1 <= settings.depth <= MAX_SIMULATOR_DEPTH:
+            raise ValueError(f"simulator transitions support depth 1-{MAX_SIMULATOR_DEPTH}, not {settings.depth}")
+        if simulator is None:
+            from frog_sim.core.rollouts import Rollouts
+            simulator = SimulatorTransitions(Rollouts(threads=1))
     period = settings.period
-    expander = simulator_expander(sim, period, model.n_primitives) if transitions == "simulator" else None
-    planner = Planner(model, path, settings, expander=expander)
+    lead = simulator.lead if transitions == "simulator" else 0.0
+    if lead >= period:
+        raise ValueError(f"lead {lead} s must be shorter than the period {period} s")
+    planner = Planner(model, path, settings)
     max_time = max_time or path.length / 0.005
     stride = int(round(sample_interval / sim.time_step))
-    steps_per_period = int(round(period / sim.time_step))
     times, poses = [], []
     decisions = []
     goal_time = None
@@ -143,11 +185,20 @@ def run_closed_loop(path: Path, model: TransitionModel, settings: PlannerSetting
         poses.append([st.com[0], st.com[1], st.heading])
         return st
 
+    def advance(until):
+        while sim.time < until - 0.5 * sim.time_step:
+            sim.step(max(1, min(stride, int(round((until - sim.time) / sim.time_step)))))
+            sample()
+
     st = sample()
+    k = 0
     while sim.time < max_time:
+        st = sim.rigid_body_state()
+        pose = [st.com[0], st.com[1], st.heading]
+        twist = [st.body_velocity[0], st.body_velocity[1], st.yaw_rate]
         t0 = time.perf_counter()
-        d = planner.decide([st.com[0], st.com[1], st.heading],
-                           [st.body_velocity[0], st.body_velocity[1], st.yaw_rate])
+        expander = simulator.expander(sim, planner, pose, twist) if transitions == "simulator" else None
+        d = planner.decide(pose, twist, expander)
         decide_s.append(time.perf_counter() - t0)
         decisions.append({"time": sim.time, "primitive": d.name, "primitive_id": d.primitive_id,
                           "total_cost": d.total_cost, "yaw_rate_cost": d.yaw_rate_cost,
@@ -160,13 +211,10 @@ def run_closed_loop(path: Path, model: TransitionModel, settings: PlannerSetting
         if d.goal_reached:
             goal_time = sim.time
             break
+        advance(k * period + lead)               # the decision is executed ``lead`` after its observation
         sim.execute_primitive(d.primitive_id)
-        done = 0
-        while done < steps_per_period:
-            k = min(stride, steps_per_period - done)
-            sim.step(k)
-            done += k
-            st = sample()
+        k += 1
+        advance(k * period)
     t = np.array(times)
     pose = np.array(poses)
     n = samples_before_finish(pose[:, :2], path.points)
@@ -177,7 +225,9 @@ def run_closed_loop(path: Path, model: TransitionModel, settings: PlannerSetting
     end = goal_time if goal_time is not None else float(t[-1])
     metrics = {
         "path": path.name, "path_length_m": path.length, "depth": settings.depth, "period_s": period,
-        "transitions": transitions, "metric": model.metric if transitions == "library" else "exact",
+        "transitions": transitions,
+        "metric": model.metric if transitions == "library" else f"simulator-{simulator.start}",
+        "lead_s": lead, "limb_strength": limb_strength,
         "k_neighbours": model.k,
         "gradient_correction": model.gradient_correction, "heading_lookahead_m": settings.heading_lookahead,
         "velocity_lookahead_s": settings.velocity_lookahead, "yaw_rate_weight": settings.yaw_rate_weight,
@@ -300,11 +350,12 @@ def plot_run(result: ClosedLoopResult, png) -> None:
     plt.close(fig)
 
 
-def save_result(result: ClosedLoopResult, folder) -> dict:
-    """Write ``<name>.json`` (metrics + decisions), ``<name>.png`` and ``<name>.npz`` samples."""
+def save_result(result: ClosedLoopResult, folder, stem: Optional[str] = None) -> dict:
+    """Write ``<stem>.json`` (metrics + decisions), ``<stem>.png`` and ``<stem>.npz`` samples
+    (default stem ``<path>_d<depth>_<metric>``)."""
     folder = FsPath(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    stem = f"{result.path.name}_d{result.metrics['depth']}_{result.metrics['metric']}"
+    stem = stem or f"{result.path.name}_d{result.metrics['depth']}_{result.metrics['metric']}"
     np.savez(folder / f"{stem}.npz", time=result.time, pose=result.pose, distance=result.distance,
              path=result.path.points)
     (folder / f"{stem}.json").write_text(json.dumps(
