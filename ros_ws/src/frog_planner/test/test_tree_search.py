@@ -343,6 +343,26 @@ def test_planner_does_not_wait_forever_at_rest(synthetic, depth):
         PlannerSettings(stall_speed=-1.0)
 
 
+@pytest.mark.parametrize("depth", [1, 2])
+def test_no_action_can_be_left_out_while_following(synthetic, depth):
+    """allow_no_action false: moving or not, the decision is the cheapest sequence that starts with
+    an action (brute force over the leaves), and the beam's ranking puts 'no action' last; at the
+    goal the planner still stops (I)."""
+    model = _drifting_model(synthetic.BITS)
+    path = line_path(length=0.3)
+    kw = dict(w_distance=500.0, w_heading=0.0, w_progress=0.0, depth=depth, heading_lookahead=0.0,
+              velocity_lookahead=0.0, allow_no_action=False)
+    res = search(model, path, [0.0, 0.0, 0.0], [0.03, 0.0, 0.0], depth, CostWeights(500.0, 0.0, 0.0))
+    span = 9 ** (depth - 1)
+    cheapest = min(res.leaf_total[i] for i in range(9 ** depth) if i // span != 8)
+    planner = Planner(model, path, PlannerSettings(**kw))
+    d = planner.decide([0.0, 0.0, 0.0], [0.03, 0.0, 0.0])
+    assert d.name != "I" and d.total_cost == pytest.approx(cheapest)
+    assert planner.rank_first_actions([0.0, 0.0, 0.0], [0.03, 0.0, 0.0], depth=depth)[-1] == 8
+    end = Planner(model, path, PlannerSettings(**kw))
+    assert end.decide([0.3, 0.0, 0.0], [0.0, 0.0, 0.0]).name == "I"          # goal reached
+
+
 def _reference_rows(states, table, pose, vel, depth, scale):
     """Rows of the rollout service's layout, written by the brute-force reference (level by level, base P)."""
     rows, velocities = [], [vel]

@@ -124,6 +124,8 @@ class Planner:
           the pose one period ahead does not show;
         - ``yaw_rate_weight``: w_r per rad/s; 0 (the paper) leaves it out. > 0 adds w_r *
           |predicted yaw rate - path curvature * predicted forward speed| at the leaf;
+        - ``allow_no_action``: True (the paper) lets the search choose 'no action' (coast); False
+          makes every period until the goal fire limbs;
         - ``stall_speed``: m/s; 0 (the paper) disables. When the robot stands still (planar
           speed below this, yaw rate below 0.01 rad/s) short of the goal and the cheapest
           sequence starts with the no-action primitive, the cheapest sequence starting with an
@@ -153,6 +155,7 @@ class Planner:
         self.velocity_lookahead = settings.velocity_lookahead
         self.yaw_rate_weight = settings.yaw_rate_weight
         self.stall_speed = settings.stall_speed
+        self.allow_no_action = settings.allow_no_action
         self.expander = expander
         bits = getattr(model, "primitive_bits", None)
         idle = [i for i, b in enumerate(bits or []) if set(b) <= {"0"}]
@@ -185,6 +188,8 @@ class Planner:
         result = search(self.model, self.path, pose, body_velocity, depth, self.weights, progress,
                         self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight)
         per_first = result.leaf_total.reshape(self.model.n_primitives, -1).min(axis=1)
+        if not self.allow_no_action and self._idle is not None:
+            per_first[self._idle] = np.inf
         return [int(i) for i in np.argsort(per_first, kind="stable")]
 
     def decide(self, pose, body_velocity, expander=None):
@@ -224,10 +229,12 @@ class Planner:
         span = n_prim ** (self.depth - 1)             # leaves per first action (base-P digits)
         standing = (np.hypot(body_velocity[0], body_velocity[1]) < self.stall_speed
                     and abs(body_velocity[2]) < STALL_YAW_RATE)
-        if standing and not goal and self._idle is not None and best // span == self._idle:
+        if (standing or not self.allow_no_action) and not goal and self._idle is not None \
+                and best // span == self._idle:
             totals = result.leaf_total.copy()
             totals[self._idle * span:(self._idle + 1) * span] = np.inf
-            best = int(np.argmin(totals))
+            if np.isfinite(totals.min()):       # a beam may have predicted no other first action
+                best = int(np.argmin(totals))
         first = best // span
         sequence = tuple(int(best // n_prim ** (self.depth - 1 - d)) % n_prim for d in range(self.depth))
         return Decision(

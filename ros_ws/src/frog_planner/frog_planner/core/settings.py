@@ -55,6 +55,9 @@ class PlannerSettings(Settings):
     yaw_rate_weight: float = setting(0.0, "weight per rad/s of |predicted yaw rate - path curvature x speed| "
                                       "at the leaf; 0 = the paper", min=0.0, max=1e6, unit="s/rad", live=True,
                                       flags=("--w-r",))
+    allow_no_action: bool = setting(True, "choose 'no action' while following; false: every period fires limbs "
+                                     "until the goal (a cost weighing the distance far above the progress would "
+                                     "otherwise wait on the path)", live=True)
     stall_speed: float = setting(0.002, "standing still (below this planar speed and 0.01 rad/s) short of the "
                                   "goal, never choose 'no action', which would wait forever; 0 = the paper",
                                   min=0.0, max=0.1, unit="m/s", live=True)
