@@ -22,8 +22,12 @@ def test_good_rows_give_the_tree_of_those_rows(depth):
     expand, reason = RolloutClient.expander(_response(rows), NAMES, depth)
     assert reason is None
     pose = np.array([0.1, -0.2, 0.7])
-    for got, want in zip(expand(pose, np.zeros(3), depth), tree_from_rows(pose, rows, depth, 9)):
-        assert np.array_equal(got, want)
+    got, want = expand(pose, np.zeros(3), depth), tree_from_rows(pose, rows, depth, 9)
+    for a, b in zip(got[:3], want[:3]):                     # leaves, first poses, leaf velocities
+        assert np.array_equal(a, b)
+    assert len(got[3]) == depth                             # and every level, for the stage cost
+    for (pa, va), (pb, vb) in zip(got[3], want[3]):
+        assert np.array_equal(pa, pb) and np.array_equal(va, vb)
 
 
 @pytest.mark.parametrize("response, words", [

@@ -419,3 +419,35 @@ def test_branches_outside_a_beam_are_never_chosen(tiny):
     rows[:] = np.nan
     with pytest.raises(ValueError, match="no leaf"):
         search(model, path, pose, vel, 2, CostWeights(), prev, expander=lambda p, v, d: tree_from_rows(p, rows, d, 9))
+
+
+@pytest.mark.parametrize("depth", [2, 3])
+def test_stage_cost_sums_every_period_end_of_a_sequence(tiny, depth):
+    """stage_cost: each sequence costs eq. 19 at each of its period ends, summed (brute force:
+    the reference chain and the reference cost at every step), from the library and from given
+    rows alike; an expander without levels is refused."""
+    from frog_planner.core.tree_search import tree_from_rows
+    states, table = tiny
+    model = TransitionModel(states, table, list("ABCDEFGHI"))
+    scale = [float(np.ptp(states[:, c])) for c in range(3)]
+    path = sinusoid_path(length=0.36, A=8.5, f=10.0, start=(0.0, 0.0), heading=0.1)
+    pose, vel, prev = (0.10, -0.03, -0.4), (0.035, -0.02, -0.3), 0.25
+    want = {}
+    for seq in itertools.product(range(9), repeat=depth):
+        p, v, total = pose, vel, 0.0
+        for a in seq:
+            p, v = ref_step(p, ref_transition(table, a, ref_nearest(states, v, "euclidean", scale, 1)))
+            total += ref_cost(path, p, prev)
+        want[seq] = total
+    best = min(want, key=want.get)
+    rows = _reference_rows(states, table, pose, vel, depth, scale)
+    for expander in (None, lambda p, v, d: tree_from_rows(p, rows, d, 9)):
+        result = search(model, path, pose, vel, depth, CostWeights(), prev, expander=expander, stage_cost=True)
+        np.testing.assert_allclose(result.leaf_total, [want[s] for s in itertools.product(range(9), repeat=depth)],
+                                   rtol=1e-9)
+        assert result.sequence == best and result.total_cost == pytest.approx(want[best], rel=1e-9)
+    leaf_only = search(model, path, pose, vel, depth, CostWeights(), prev)
+    assert leaf_only.total_cost < result.total_cost           # the leaf is one of the summed ends
+    with pytest.raises(ValueError, match="every level"):
+        search(model, path, pose, vel, depth, CostWeights(), prev, stage_cost=True,
+               expander=lambda p, v, d: tree_from_rows(p, rows, d, 9)[:3])

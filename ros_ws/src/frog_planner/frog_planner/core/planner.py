@@ -124,6 +124,8 @@ class Planner:
           the pose one period ahead does not show;
         - ``yaw_rate_weight``: w_r per rad/s; 0 (the paper) leaves it out. > 0 adds w_r *
           |predicted yaw rate - path curvature * predicted forward speed| at the leaf;
+        - ``stage_cost``: False (the paper) costs a sequence at its leaf; True sums the cost at
+          each of its period ends (depth > 1), so a good leaf reached by a detour costs the detour;
         - ``allow_no_action``: True (the paper) lets the search choose 'no action' (coast); False
           makes every period until the goal fire limbs;
         - ``stall_speed``: m/s; 0 (the paper) disables. When the robot stands still (planar
@@ -156,6 +158,7 @@ class Planner:
         self.yaw_rate_weight = settings.yaw_rate_weight
         self.stall_speed = settings.stall_speed
         self.allow_no_action = settings.allow_no_action
+        self.stage_cost = settings.stage_cost
         self.expander = expander
         bits = getattr(model, "primitive_bits", None)
         idle = [i for i, b in enumerate(bits or []) if set(b) <= {"0"}]
@@ -186,7 +189,8 @@ class Planner:
         now = path_cost(self.path, pose, self.weights, self._progress, self.heading_lookahead)
         progress = max(self._progress, float(now.progress[0]))
         result = search(self.model, self.path, pose, body_velocity, depth, self.weights, progress,
-                        self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight)
+                        self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight,
+                        stage_cost=self.stage_cost)
         per_first = result.leaf_total.reshape(self.model.n_primitives, -1).min(axis=1)
         if not self.allow_no_action and self._idle is not None:
             per_first[self._idle] = np.inf
@@ -221,7 +225,7 @@ class Planner:
         self._progress = max(self._progress, float(now.progress[0]))
         result = search(self.model, self.path, pose, body_velocity, self.depth, self.weights, self._progress,
                         self.heading_lookahead, self.velocity_lookahead, self.yaw_rate_weight,
-                        expander or self.expander)
+                        expander or self.expander, stage_cost=self.stage_cost)
         goal = self.path.goal_reached(pose, self._progress, self._previous_pose)
         self._previous_pose = pose[:2].copy()
         best = result.best_leaf

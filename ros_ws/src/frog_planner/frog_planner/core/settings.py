@@ -55,6 +55,8 @@ class PlannerSettings(Settings):
     yaw_rate_weight: float = setting(0.0, "weight per rad/s of |predicted yaw rate - path curvature x speed| "
                                       "at the leaf; 0 = the paper", min=0.0, max=1e6, unit="s/rad", live=True,
                                       flags=("--w-r",))
+    stage_cost: bool = setting(False, "cost a sequence at each of its period ends, summed (false: at its leaf "
+                                "only, the paper); depth > 1", live=True)
     allow_no_action: bool = setting(True, "choose 'no action' while following; false: every period fires limbs "
                                      "until the goal (a cost weighing the distance far above the progress would "
                                      "otherwise wait on the path)", live=True)

@@ -123,6 +123,9 @@ class SearchResult:
         Index of the cheapest leaf.
     yaw_rate_cost : numpy.ndarray, shape (P^H,)
         w_r * |yaw rate - path curvature * forward speed| at every leaf (zeros when w_r = 0).
+    stage_cost : numpy.ndarray, shape (P^H,)
+        With ``stage_cost``: the cost (eq. 19 plus the yaw-rate term) at the period ends before
+        each leaf, summed; zeros otherwise.
     """
 
     sequence: tuple
@@ -131,11 +134,15 @@ class SearchResult:
     first_poses: np.ndarray
     best_leaf: int
     yaw_rate_cost: np.ndarray
+    stage_cost: np.ndarray = None
 
     @property
     def leaf_total(self):
-        """Cost of every leaf: eq. 19 plus the yaw-rate term, shape (P^H,); inf where not predicted."""
+        """Cost of every sequence: eq. 19 plus the yaw-rate term at its leaf, plus its stage cost,
+        shape (P^H,); inf where not predicted."""
         total = self.leaf_cost.total + self.yaw_rate_cost
+        if self.stage_cost is not None:
+            total = total + self.stage_cost
         return np.where(np.isfinite(total), total, np.inf)
 
     @property
@@ -145,11 +152,11 @@ class SearchResult:
 
     @property
     def total_cost(self):
-        """Cost of the cheapest leaf (eq. 19 plus the yaw-rate term)."""
-        return float(self.leaf_cost.total[self.best_leaf] + self.yaw_rate_cost[self.best_leaf])
+        """Cost of the cheapest sequence (:attr:`leaf_total` of the best leaf)."""
+        return float(self.leaf_total[self.best_leaf])
 
 
-def expand_tree(model, pose, body_velocity, depth, return_velocities=False):
+def expand_tree(model, pose, body_velocity, depth, return_velocities=False, return_levels=False):
     """Predict the leaves of all P^H sequences (Algorithm 1 steps 5-14, vectorised).
 
     Parameters
@@ -163,6 +170,8 @@ def expand_tree(model, pose, body_velocity, depth, return_velocities=False):
         H, 1 <= H <= 5.
     return_velocities : bool
         Also return the predicted body velocities at the leaves.
+    return_levels : bool
+        Also return every level (with ``return_velocities``).
 
     Returns
     -------
@@ -170,29 +179,34 @@ def expand_tree(model, pose, body_velocity, depth, return_velocities=False):
     first_poses : numpy.ndarray, shape (P, 3)
     leaf_velocities : numpy.ndarray, shape (P^H, 3)
         Only with ``return_velocities``: forward m/s, lateral m/s, yaw rate rad/s.
+    levels : list of (poses, velocities)
+        Only with ``return_levels``: level d (0-based) holds the P^(d+1) period ends of d + 1
+        periods, in base-P order.
     """
     depth = int(depth)
     if not 1 <= depth <= MAX_DEPTH:
         raise ValueError(f"search depth {depth} is out of range; expected 1-{MAX_DEPTH}")
-    poses, first, velocities = _chain(pose, body_velocity, depth, lambda level, vel: model.lookup(vel))
+    poses, first, velocities, levels = _chain(pose, body_velocity, depth, lambda level, vel: model.lookup(vel))
+    if return_levels:
+        return poses, first, velocities, levels
     if return_velocities:
         return poses, first, velocities
     return poses, first
 
 
 def _chain(pose, body_velocity, depth, transitions):
-    """Leaves, first poses and leaf velocities of a tree; ``transitions(level, velocities)`` -> (M, P, 6)."""
+    """Leaves, first poses, leaf velocities and every level (poses, velocities) of a tree;
+    ``transitions(level, velocities)`` -> (M, P, 6)."""
     poses = np.asarray(pose, dtype=float).reshape(1, 3)
     velocities = np.asarray(body_velocity, dtype=float).reshape(1, 3)
-    first = None
+    levels = []
     for level in range(depth):
         trans = transitions(level, velocities)                         # (M, P, 6)
         poses, velocities = apply_transition(poses[:, None, :], trans)  # (M, P, 3) each, eq. 18
         poses = poses.reshape(-1, 3)
         velocities = velocities.reshape(-1, 3)
-        if first is None:
-            first = poses.copy()
-    return poses, first, velocities
+        levels.append((poses, velocities))
+    return poses, levels[0][0].copy(), velocities, levels
 
 
 def check_rows(rows, depth, n_primitives) -> list:
@@ -223,8 +237,8 @@ def tree_from_rows(pose, rows, depth, n_primitives):
 
     Returns
     -------
-    leaf_poses, first_poses, leaf_velocities : numpy.ndarray
-        As :func:`expand_tree` with ``return_velocities``.
+    leaf_poses, first_poses, leaf_velocities, levels
+        As :func:`expand_tree` with ``return_levels``.
     """
     depth, p = int(depth), int(n_primitives)
     rows = np.asarray(rows, dtype=float)
@@ -264,7 +278,7 @@ def extrapolate_poses(poses, body_velocities, horizon):
 
 
 def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), previous_progress=0.0,
-           heading_lookahead=0.0, velocity_lookahead=0.0, yaw_rate_weight=0.0, expander=None):
+           heading_lookahead=0.0, velocity_lookahead=0.0, yaw_rate_weight=0.0, expander=None, stage_cost=False):
     """Cheapest of all P^H primitive sequences under eq. 19 (Algorithm 1).
 
     Parameters
@@ -292,9 +306,13 @@ def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), pre
         (kappa: signed path curvature at the leaf's closest point), so that a turn's payoff,
         the yaw rate it leaves, counts although its heading change within T is small.
     expander : callable, optional
-        ``expander(pose, body_velocity, depth) -> (leaf_poses, first_poses, leaf_velocities)``
+        ``expander(pose, body_velocity, depth) -> (leaf_poses, first_poses, leaf_velocities[, levels])``
         with the leaves in the order of :func:`expand_tree`; replaces the library prediction
         (e.g. by the simulator itself, to separate the library's error from the planner's).
+    stage_cost : bool
+        False (the paper): a sequence costs its leaf. True: the sum of the cost at each of its
+        period ends, so that a sequence cannot buy a good leaf with a detour on the way (the
+        expander must then give the levels).
 
     Returns
     -------
@@ -303,21 +321,31 @@ def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), pre
     """
     if not (np.isfinite(velocity_lookahead) and velocity_lookahead >= 0.0):
         raise ValueError(f"velocity_lookahead {velocity_lookahead} s must be a finite number >= 0")
-    if expander is None:
-        leaves, first, leaf_velocities = expand_tree(model, pose, body_velocity, depth, return_velocities=True)
-    else:
-        leaves, first, leaf_velocities = expander(pose, body_velocity, depth)
-    costed = extrapolate_poses(leaves, leaf_velocities, velocity_lookahead) if velocity_lookahead > 0 else leaves
-    cost = path_cost(path, costed, weights, previous_progress, heading_lookahead)
     if not (np.isfinite(yaw_rate_weight) and yaw_rate_weight >= 0.0):
         raise ValueError(f"yaw_rate_weight {yaw_rate_weight} must be a finite number >= 0")
-    if yaw_rate_weight > 0.0:
-        needed = path.curvature_at(cost.progress) * leaf_velocities[:, 0]
-        yaw_cost = yaw_rate_weight * np.abs(leaf_velocities[:, 2] - needed)
-    else:
-        yaw_cost = np.zeros(len(leaves))
+    tree = (expand_tree(model, pose, body_velocity, depth, return_levels=True) if expander is None
+            else expander(pose, body_velocity, depth))
+    leaves, first, leaf_velocities = tree[:3]
+
+    def costs(poses, velocities):
+        costed = extrapolate_poses(poses, velocities, velocity_lookahead) if velocity_lookahead > 0 else poses
+        c = path_cost(path, costed, weights, previous_progress, heading_lookahead)
+        if yaw_rate_weight > 0.0:
+            needed = path.curvature_at(c.progress) * velocities[:, 0]
+            return c, yaw_rate_weight * np.abs(velocities[:, 2] - needed)
+        return c, np.zeros(len(poses))
+
+    cost, yaw_cost = costs(leaves, leaf_velocities)
+    before = np.zeros(len(leaves))
+    if stage_cost and int(depth) > 1:
+        if len(tree) < 4:
+            raise ValueError("stage_cost needs every level of the tree; this expander gives only its leaves")
+        for level_poses, level_velocities in tree[3][:-1]:      # the leaves' own cost is in ``cost``
+            c, y = costs(level_poses, level_velocities)
+            before = before + np.repeat(c.total + y, len(leaves) // len(level_poses))
     # leaves an expander did not predict (NaN: a branch outside a beam) are never chosen
-    total = np.where(np.isfinite(cost.total + yaw_cost), cost.total + yaw_cost, np.inf)
+    total = cost.total + yaw_cost + before
+    total = np.where(np.isfinite(total), total, np.inf)
     if not np.any(np.isfinite(total)):
         raise ValueError("no leaf of the search tree has a finite cost (every prediction is NaN)")
     best = int(np.argmin(total))
@@ -328,4 +356,4 @@ def search(model, path, pose, body_velocity, depth=1, weights=CostWeights(), pre
         digits.append(rest % n_prim)
         rest //= n_prim
     return SearchResult(sequence=tuple(reversed(digits)), leaf_cost=cost, leaf_poses=leaves,
-                        first_poses=first, best_leaf=best, yaw_rate_cost=yaw_cost)
+                        first_poses=first, best_leaf=best, yaw_rate_cost=yaw_cost, stage_cost=before)
