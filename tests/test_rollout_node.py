@@ -115,3 +115,67 @@ def test_a_beam_after_a_lead_is_the_cores_coast_then_the_beams_pairs(launch, pro
     level2 = np.concatenate([rows[9 + 9 * i:9 + 9 * (i + 1)] for i in inside])
     second_pose, _ = apply_transition(np.repeat(first_pose, 9, axis=0), level2)
     np.testing.assert_allclose(second_pose[:, :2], truth.pose[:, 1, :2], atol=1e-7)
+
+
+def test_the_limbs_are_learned_from_consecutive_requests_and_forgotten_on_request(launch, probe):
+    """A robot with a weak FR and a strong FL, simulated here (FrogSimulation, known limbs): each
+    period's request carries its stamp, tracked pose, twist and firings, as planner_node sends
+    them. The node's diagnostics then report the limbs near the truth, the rollouts use them (a
+    C differs from the nominal robot's), ~/forget_limbs returns to nominal, and requests without
+    a stamp teach nothing."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from soft_robot_interfaces.srv import Rollouts
+    from std_srvs.srv import Trigger
+
+    from frog_common.primitives import LIMB_NAMES
+    from frog_sim.core.simulation import FrogSimulation
+    truth = {"FL": 1.2, "FR": 0.75, "BL": 1.1, "BR": 0.95}
+    node = launch("rollout_node", params={"threads": 1})
+    node.wait_for_log("ready in", timeout=240)
+    client = probe.node.create_client(Rollouts, "/frog/rollouts")
+    forget = probe.node.create_client(Trigger, "/rollout_node/forget_limbs")
+    probe.wait_for_service(client, timeout=30)
+    diag = {}
+
+    def on_diag(msg):
+        for st in msg.status:
+            if "rollouts" in st.name:
+                diag.update({kv.key: kv.value for kv in st.values})
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
+
+    def request(sim, stamped=True):
+        st = sim.rigid_body_state()
+        fired = []
+        for limb in LIMB_NAMES:
+            times = sim.schedule.times(limb)
+            times = times[times <= sim.time + 1e-12]
+            if times.size and sim.time - times[-1] < 10.0:
+                fired.append((limb, sim.time - float(times[-1])))
+        req = _request(1, fired=fired, pose=(*st.com, st.heading), twist=(*st.body_velocity, st.yaw_rate),
+                       period=1.43)
+        if stamped:
+            req.stamp.sec, req.stamp.nanosec = int(100 + sim.time), int(round((sim.time % 1) * 1e9)) % 10 ** 9
+        return req
+
+    sim = FrogSimulation()
+    sim.set_limb_strength(truth)
+    steps = int(round(1.43 / sim.time_step))
+    for prim in "BCDBEFBGHBCDBEFBGHBB":
+        res = probe.call(client, request(sim), timeout=60)
+        assert res.success, res.message
+        sim.execute_primitive(prim)
+        sim.step(steps)
+    probe.spin_until(lambda: float(diag.get("identification_updates", 0)) >= 19, 10, "19 updates in diagnostics")
+    for limb, want in truth.items():
+        assert float(diag[f"strength_{limb}"]) == pytest.approx(want, abs=0.06), diag
+    learned = np.asarray(probe.call(client, _request(1), timeout=60).transitions).reshape(-1, 6)
+    reply = probe.call(forget, Trigger.Request(), timeout=10)
+    assert reply.success and "limbs back to nominal; were FL 1." in reply.message
+    nominal = np.asarray(probe.call(client, _request(1), timeout=60).transitions).reshape(-1, 6)
+    assert abs(learned[2, 2] - nominal[2, 2]) > 1e-3          # C turns otherwise with these limbs
+    for _ in range(3):                                          # unstamped: nothing to chain
+        assert probe.call(client, request(sim, stamped=False), timeout=60).success
+        sim.execute_primitive("C")
+        sim.step(steps)
+    probe.spin_until(lambda: float(diag.get("identification_updates", -1)) == 0
+                     and float(diag.get("strength_FL", 0)) == 1.0, 10, "nominal limbs, no update")

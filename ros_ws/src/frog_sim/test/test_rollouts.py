@@ -203,10 +203,55 @@ def test_a_decision_tree_coasts_the_lead_then_chains_each_period_from_the_last(r
         np.testing.assert_allclose(lvl1, body_frame(np.asarray(POSE), one), atol=2e-6)
         parent = np.array([*one.com, one.heading])
         np.testing.assert_allclose(lvl2, body_frame(parent, two), atol=2e-6)
+    np.testing.assert_allclose(result.lead_end.pose, coast.pose, atol=1e-12)
+    # from the coast's end (the execution instant), level 1 is that end's own period
+    from_end, _ = rollouts.decision_tree(start, PERIOD, depth=2, lead=lead, first_primitives=("C", "B"),
+                                         from_lead_end=True)
+    (one, _), = reference(coast, ("C",), PERIOD, rollouts.step_plan(coast, ("C",), PERIOD), force_tolerance=1e-4)
+    np.testing.assert_allclose(from_end[2], body_frame(coast.pose, one), atol=2e-6)
+    np.testing.assert_array_equal(from_end[9:], rows[9:])
     outside = [i for i, n in enumerate(names) if n not in "BC"]
     assert np.isnan(rows[outside]).all() and np.isfinite(rows[[1, 2]]).all()
     with pytest.raises(ValueError, match="lead"):
         rollouts.decision_tree(start, PERIOD, lead=-0.1)
+
+
+def test_limbs_fired_at_any_time_and_limb_strengths_are_frog_simulation_s(rollouts):
+    """run_firings against FrogSimulation.step with the same firings, steps and limb strengths: a C
+    stroke fired 0.4 s into a 1.2 s window (as the bridge fires a decision made before it) with a
+    weak FL and a strong BL; the nominal rollout differs by far more than the tolerance."""
+    start = rollouts.estimated_start(POSE, TWIST, FIRED)
+    strength = {"FL": 0.8, "BL": 1.25}
+    firings = {"FL": 0.4, "BL": 0.48}
+    try:
+        rollouts.set_limb_strength(strength)
+        assert rollouts.limb_strength == {"FL": 0.8, "FR": 1.0, "BL": 1.25, "BR": 1.0}
+        weak = rollouts.estimated_start(POSE, TWIST, FIRED)
+        end = rollouts.run_firings(weak, firings, 1.2)
+    finally:
+        rollouts.set_limb_strength(None)
+    nominal = rollouts.run_firings(start, firings, 1.2)
+    sim = FrogSimulation(force_tolerance=1e-4)
+    sim.set_limb_strength(strength)
+    sim.integrator.set_state(x=weak.x, v=weak.v)
+    for lid, t in enumerate(weak.last_firing):
+        if np.isfinite(t):
+            sim.fire_limbs([LIMB_NAMES[lid]], start=float(t))
+    for limb, t in firings.items():
+        sim.fire_limbs([limb], start=t)
+    sim._unwrap.reset(weak.pose[2])
+    latest = max(firings.values())
+    for n, h in rollouts.period_steps(0.0, 1.2, latest):
+        sim.time_step = h
+        sim.step(n)
+    ref = sim.rigid_body_state()
+    np.testing.assert_allclose(end.pose, [*ref.com, ref.heading], atol=2e-6)
+    np.testing.assert_allclose(end.twist, [*ref.body_velocity, ref.yaw_rate], atol=2e-5)
+    assert abs(nominal.pose[2] - end.pose[2]) > 100 * 2e-6
+    with pytest.raises(ValueError, match="outside"):
+        rollouts.run_firings(start, {"FL": 1.5}, 1.2)
+    with pytest.raises(ValueError, match="unknown"):
+        rollouts.run_firings(start, {"XX": 0.5}, 1.2)
 
 
 def test_a_failed_fast_step_is_redone_as_frog_simulation_does():

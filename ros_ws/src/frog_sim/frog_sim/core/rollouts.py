@@ -125,6 +125,9 @@ class RolloutResult:
     ends : dict
         Prefix (tuple of names) -> :class:`RolloutStart` at the end of its last period: the
         full state (node positions ...), with that end as t = 0 (a start to continue from).
+    lead_end : RolloutStart or None
+        :meth:`Rollouts.decision_tree`: where the coast before the decision ended (the
+        sequences' start; its pose and twist in the world frame).
     stats : dict
         Jobs (simulated stretches), steps, Newton iterations, LU factorisations, fallbacks
         (jobs redone with step halving), failed (jobs that did not converge).
@@ -136,6 +139,7 @@ class RolloutResult:
     converged: np.ndarray
     ends: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
+    lead_end: RolloutStart | None = None
 
 
 @intrinsic
@@ -310,6 +314,18 @@ class Rollouts:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+    # ------------------------------------------------------------------ the robot
+    def set_limb_strength(self, strength=None) -> None:
+        """The limb strengths the rollouts believe in (``FrogSimulation.set_limb_strength``: limb
+        name -> kick factor, missing = 1; None: the nominal robot), for the start shapes too."""
+        for sim in self._sims:
+            sim.set_limb_strength(strength)
+
+    @property
+    def limb_strength(self) -> dict:
+        """Kick strength factor of each limb the rollouts use (1 = nominal)."""
+        return self._sims[0].limb_strength
 
     # ------------------------------------------------------------------ start states
     def estimated_start(self, pose, twist, last_fired=None, now: float = 0.0) -> RolloutStart:
@@ -577,7 +593,7 @@ class Rollouts:
                              stats=stats)
 
     def decision_tree(self, start: RolloutStart, period: float, depth: int = 1, lead: float = 0.0,
-                      first_primitives=()) -> tuple[np.ndarray, RolloutResult]:
+                      first_primitives=(), from_lead_end: bool = False) -> tuple[np.ndarray, RolloutResult]:
         """A planner decision's tree: coast ``lead`` [s] from ``start`` (nothing fired, limbs
         relaxing: where the robot will be when the decision fires), then every sequence of
         ``depth`` primitives, one per ``period`` (only those starting with one of
@@ -586,8 +602,9 @@ class Rollouts:
         Returns
         -------
         rows : ndarray, shape (P + ... + P^depth, 6)
-            :func:`tree_rows` from ``start.pose`` (before the lead): what the planner chains by
-            eq. 18 (frog_planner ``tree_from_rows``), NaN where not simulated.
+            :func:`tree_rows` from ``start.pose`` (before the lead; with ``from_lead_end`` from
+            the coast's end, where the decision is executed): what the planner chains by eq. 18
+            (frog_planner ``tree_from_rows``), NaN where not simulated.
         result : RolloutResult
             The rollouts after the lead.
 
@@ -608,7 +625,39 @@ class Rollouts:
                 raise ValueError(f'the {lead:.3f} s coast before the decision did not converge')
         seqs = [s for s in itertools.product(PRIMITIVE_NAMES, repeat=int(depth)) if not firsts or s[0] in firsts]
         result = self.rollout_batch(start, seqs, period=period)
-        return tree_rows(result, origin, int(depth)), result
+        result.lead_end = start
+        return tree_rows(result, start.pose if from_lead_end else origin, int(depth)), result
+
+    def run_firings(self, start: RolloutStart, firings, duration: float) -> RolloutStart | None:
+        """Simulate ``duration`` [s] from ``start`` with limbs fired at given times (not a primitive
+        schedule: what a robot actually fired, e.g. from ``frog/bridge/sent``).
+
+        Parameters
+        ----------
+        firings : mapping
+            Limb name or id -> firing time [s] in [0, duration] on the start's clock (at most one
+            per limb).
+
+        Returns
+        -------
+        RolloutStart or None
+            The end state (its time ``duration``; firing times on the start's clock), or None
+            if the step did not converge.
+        """
+        if not (np.isfinite(duration) and 0.0 < duration <= 5.0):
+            raise ValueError(f'duration = {duration!r} s must be in (0, 5]')
+        times = [[t] if np.isfinite(t) else [] for t in start.last_firing]
+        for key, t in dict(firings).items():
+            lid = key if isinstance(key, (int, np.integer)) and 0 <= key < _N_LIMBS else LIMB_IDS.get(key)
+            if lid is None:
+                raise ValueError(f'limb {key!r} is unknown; expected one of {LIMB_NAMES} or an id 0-3')
+            if not (np.isfinite(t) and 0.0 <= t <= duration):
+                raise ValueError(f'limb {LIMB_NAMES[lid]} fired at {t!r} s, outside [0, {duration}] s')
+            times[int(lid)] = times[int(lid)][-1:] + [float(t)]
+        latest = max((ts[-1] for ts in times if ts), default=-np.inf)
+        stats = {'jobs': 0, 'steps': 0, 'newton_iterations': 0, 'factorisations': 0, 'fallbacks': 0, 'failed': 0}
+        job = ((), 0, 0.0, times, self.period_steps(0.0, float(duration), latest))
+        return self._run_wave([job], {(): start}, stats)[0]
 
     def _run_wave(self, batch, done, stats):
         """Jobs whose parents are done, in one :func:`_run_jobs` call per thread; their ends."""

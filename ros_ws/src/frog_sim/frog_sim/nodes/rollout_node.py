@@ -11,6 +11,14 @@ the others. ``lead`` first coasts the estimated state (nothing fired, limbs rela
 time until the decision will be executed, so the tree starts where the robot will be when
 it fires; ``first_primitives`` restricts depth 2 to a beam (the other rows are NaN).
 
+With ``identify_limbs`` (default) the node also learns the robot's four limb strengths from
+consecutive requests: a request's ``stamp`` (the pose's capture time), pose, twist and firings
+say where the robot went since the previous one, which the rollouts predict again with the
+limbs as fired (:class:`frog_sim.core.limb_identification.LimbIdentification`, an extended
+Kalman filter on the log-strengths). The trees are then rolled out with the estimate, which
+``diagnostics`` reports per limb (``strength_FL`` ... and their sd); ``~/forget_limbs``
+starts over (a new robot, a repaired limb).
+
     ros2 run frog_sim rollout_node --ros-args -p threads:=2
     ros2 service call /frog/rollouts soft_robot_interfaces/srv/Rollouts "{period: 1.43, depth: 1}"
 """
@@ -26,7 +34,9 @@ from rclpy.node import Node
 from soft_robot_common import MessageGate, Param, declare_parameters, run_node
 from soft_robot_common.diagnostics import OK, WARN, NodeDiagnostics
 from soft_robot_interfaces.srv import Rollouts as RolloutsSrv
+from std_srvs.srv import Trigger
 
+from frog_sim.core.limb_identification import LimbIdentification
 from frog_sim.core.rollouts import COAST_TIME_STEP, KICK_WINDOW, ROLLOUT_FORCE_TOLERANCE, Rollouts
 from frog_common.primitives import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import DEFAULT_TIME_STEP
@@ -39,6 +49,8 @@ PARAMS = [
     Param("coast_time_step", COAST_TIME_STEP, "longest time step after the kick window [s]", min=1e-4, max=0.05),
     Param("kick_window", KICK_WINDOW, "fine steps for this long after each firing [s]", min=0.0, max=5.0),
     Param("force_tolerance", ROLLOUT_FORCE_TOLERANCE, "Newton residual tolerance [N]", min=1e-9, max=1e-2),
+    Param("identify_limbs", True, "learn the robot's limb strengths from consecutive requests (stamp, pose, twist, "
+          "firings) and roll out with them; false: the nominal limbs", live=True),
 ]
 
 
@@ -49,7 +61,7 @@ class RolloutNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("rollout_node", **kwargs)
-        self.cfg = declare_parameters(self, PARAMS)
+        self.cfg = declare_parameters(self, PARAMS, on_change=self.on_parameters)
         p = self.cfg
         self.gate = MessageGate(self)     # non-finite or oversized requests are refused
         t0 = time.monotonic()
@@ -59,9 +71,11 @@ class RolloutNode(Node):
         # compile and warm up now, not in the first decision
         warm = self.rollouts.estimated_start((0.0, 0.0, 0.0), (0.01, 0.0, 0.0))
         self.rollouts.rollout_batch(warm, [("B",), ("C",)], period=0.5)
+        self.identification = LimbIdentification(self.rollouts)
         self.requests = self.failures = 0
         self.last_compute = math.nan
         self.create_service(RolloutsSrv, "frog/rollouts", self.on_request)
+        self.create_service(Trigger, "~/forget_limbs", self.on_forget_limbs)
         self.diagnostics = NodeDiagnostics(self, "rollouts", self._diagnostics)
         self.get_logger().info(f"ready in {time.monotonic() - t0:.1f} s: {self.rollouts.threads} thread(s), "
                                f"step {p['kick_time_step'] * 1e3:.1f} ms for {p['kick_window']} s after a "
@@ -70,8 +84,29 @@ class RolloutNode(Node):
 
     def _diagnostics(self):
         level = OK if not self.failures else WARN
-        return level, "ready", {"requests": self.requests, "failures": self.failures,
-                                "last_compute_s": self.last_compute, "threads": self.rollouts.threads}
+        values = {"requests": self.requests, "failures": self.failures, "last_compute_s": self.last_compute,
+                  "threads": self.rollouts.threads, "identify_limbs": self.cfg["identify_limbs"],
+                  "identification_updates": self.identification.updates}
+        for limb, value in self.rollouts.limb_strength.items():
+            values[f"strength_{limb}"] = value
+            values[f"strength_sd_{limb}"] = self.identification.sd[limb]
+        return level, "ready", values
+
+    def on_parameters(self, changed: dict) -> None:
+        if "identify_limbs" in changed:
+            self.forget_limbs()
+
+    def forget_limbs(self) -> None:
+        self.identification.reset()
+        self.rollouts.set_limb_strength(None)
+
+    def on_forget_limbs(self, request, response):
+        learned = self.identification.strengths
+        self.forget_limbs()
+        response.success = True
+        response.message = "limbs back to nominal; were " + ", ".join(f"{k} {v:.3f}" for k, v in learned.items())
+        self.get_logger().info(response.message)
+        return response
 
     def _refuse(self, response, reason: str):
         self.failures += 1
@@ -109,8 +144,12 @@ class RolloutNode(Node):
         pose = (request.pose.x, request.pose.y, request.pose.theta)
         twist = (request.twist.linear.x, request.twist.linear.y, request.twist.angular.z)
         t0 = time.monotonic()
+        stamp = request.stamp.sec + request.stamp.nanosec * 1e-9
         try:
-            start = self.rollouts.estimated_start(pose, twist, fired, now=0.0)
+            if self.cfg["identify_limbs"] and stamp > 0.0:
+                start = self.identification.start(stamp, pose, twist, {k: stamp + t for k, t in fired.items()})
+            else:
+                start = self.rollouts.estimated_start(pose, twist, fired, now=0.0)
             rows, result = self.rollouts.decision_tree(start, request.period, request.depth, request.lead, firsts)
         except ValueError as exc:
             return self._refuse(response, str(exc))
@@ -124,6 +163,10 @@ class RolloutNode(Node):
                             f"{self.last_compute:.3f} s")
         response.primitive_names = list(PRIMITIVE_NAMES)
         response.transitions = rows.ravel().tolist()
+        end = result.lead_end
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        dx, dy = end.pose[0] - pose[0], end.pose[1] - pose[1]
+        response.lead_transition = [c * dx + s * dy, -s * dx + c * dy, end.pose[2] - pose[2], *map(float, end.twist)]
         response.compute_time = self.last_compute
         self.get_logger().debug(response.message)
         return response
