@@ -77,17 +77,28 @@ def _setup(launch, probe, library, **params):
     return node, status, diags, feed_until
 
 
-def _coasted_prediction(core, lead, primitive):
+def _coasted_prediction(core, lead, primitive, reanchor=False):
+    """The pose one period after the decision, rolled out from POSE coasted ``lead`` s; with
+    ``reanchor`` that period's motion from the coast's end, placed at the newest pose (POSE:
+    the test's robot does not move)."""
     start = core.estimated_start(POSE, TWIST)
     start = core.rollout_batch(start, [("I",)], period=lead).ends[("I",)]
-    return core.rollout_batch(start, [(primitive,)], period=PERIOD).pose[0, 0]
+    end = core.rollout_batch(start, [(primitive,)], period=PERIOD).pose[0, 0]
+    if not reanchor:
+        return end
+    c, s = math.cos(start.pose[2]), math.sin(start.pose[2])
+    dx, dy = end[0] - start.pose[0], end[1] - start.pose[1]
+    fx, fy = c * dx + s * dy, -s * dx + c * dy                 # the period in the coast end's frame
+    c, s = math.cos(POSE[2]), math.sin(POSE[2])
+    return np.array([POSE[0] + c * fx - s * fy, POSE[1] + s * fx + c * fy, POSE[2] + end[2] - start.pose[2]])
 
 
-def test_decisions_are_the_simulators_rollouts_from_the_coasted_state(launch, probe, library):
+@pytest.mark.parametrize("reanchor", [False, True])
+def test_decisions_are_the_simulators_rollouts_from_the_coasted_state(launch, probe, library, reanchor):
     from frog_sim.core.rollouts import Rollouts
     server = launch("rollout_node", params={"threads": 1})
     server.wait_for_log("ready in", timeout=240)
-    node, status, diags, feed_until = _setup(launch, probe, library)
+    node, status, diags, feed_until = _setup(launch, probe, library, reanchor=reanchor)
     feed_until(lambda: sum("simulator, depth 1" in s.message for s in status) >= 2, 60, "two simulator decisions")
     decided = [s for s in status if "simulator, depth 1" in s.message]
     with Rollouts(threads=1) as core:
@@ -95,7 +106,7 @@ def test_decisions_are_the_simulators_rollouts_from_the_coasted_state(launch, pr
             # the lead runs from the pose's stamp to DEADLINE periods after the tick; the status says it
             lead = float(re.search(r"lead (\d+\.\d+) s", s.message).group(1))
             assert DEADLINE * PERIOD <= lead < DEADLINE * PERIOD + 0.5, s.message
-            want = _coasted_prediction(core, lead, s.primitive_name)
+            want = _coasted_prediction(core, lead, s.primitive_name, reanchor)
             got = np.array([s.predicted_pose.x, s.predicted_pose.y, s.predicted_pose.theta])
             assert np.linalg.norm(got[:2] - want[:2]) < 2e-4, (s.primitive_name, got, want)
             assert abs(math.remainder(got[2] - want[2], 2 * math.pi)) < 1e-3, (s.primitive_name, got, want)
@@ -111,6 +122,8 @@ def test_decisions_are_the_simulators_rollouts_from_the_coasted_state(launch, pr
                      >= 2, 10, "the diagnostics' count")
     assert float(_values(diags, "last_rollout_s")[-1]) > 0
 
+    if reanchor:
+        return
     # the server goes away: the next decisions are the library's, said in the status, log and diagnostics
     warned = node.log_text().count("library decision instead")      # discovery may have warned once
     server.stop()
@@ -154,6 +167,7 @@ class _StandIn:
         response.success, response.message = True, "stand-in"
         response.primitive_names = list("ABCDEFGHI")
         response.transitions = rows.ravel().tolist()
+        response.lead_transition = [0.01 * request.lead, 0.0, 0.0, 0.01, 0.0, 0.0]
         response.compute_time = self.delay
         return response
 

@@ -451,3 +451,32 @@ def test_stage_cost_sums_every_period_end_of_a_sequence(tiny, depth):
     with pytest.raises(ValueError, match="every level"):
         search(model, path, pose, vel, depth, CostWeights(), prev, stage_cost=True,
                expander=lambda p, v, d: tree_from_rows(p, rows, d, 9)[:3])
+
+
+def test_reanchored_rows_chained_from_the_lead_s_end_are_the_original_tree():
+    """Chaining reanchored rows from where the lead ended (computed here by composing the lead's
+    transition onto the request pose) gives the original tree's leaves and levels; from another
+    pose, the same tree moved rigidly with it."""
+    from frog_planner.core.prediction import apply_transition
+    from frog_planner.core.tree_search import reanchor_rows, tree_from_rows
+    rng = np.random.default_rng(5)
+    rows = rng.normal(0, 0.02, (9 + 81, 6))
+    lead = np.array([0.012, -0.004, 0.2, 0.01, 0.0, 0.05])
+    pose = np.array([0.1, -0.2, 0.7])
+    end, _ = apply_transition(pose, lead[None, :])
+    original = tree_from_rows(pose, rows, 2, 9)
+    moved = reanchor_rows(rows, lead, 9)
+    anchored = tree_from_rows(end[0], moved, 2, 9)
+    np.testing.assert_allclose(anchored[0], original[0], atol=1e-12)
+    np.testing.assert_allclose(anchored[1], original[1], atol=1e-12)
+    np.testing.assert_array_equal(moved[9:], rows[9:])
+    # from a pose 1 cm left and 0.1 rad more: the leaves move with it, rigidly
+    other = end[0] + np.array([-0.01 * math.sin(end[0, 2]), 0.01 * math.cos(end[0, 2]), 0.1])
+    shifted = tree_from_rows(other, moved, 2, 9)[0]
+    def rel(base, p):
+        c, s = np.cos(base[2]), np.sin(base[2])
+        return np.column_stack([c * (p[:, 0] - base[0]) + s * (p[:, 1] - base[1]),
+                                -s * (p[:, 0] - base[0]) + c * (p[:, 1] - base[1])])
+    np.testing.assert_allclose(rel(other, shifted), rel(end[0], original[0]), atol=1e-12)
+    with pytest.raises(ValueError, match="6 finite"):
+        reanchor_rows(rows, [0.0] * 5, 9)

@@ -59,7 +59,8 @@ def _run(args, case, path, depth, metric, model_cache, seed=None, start="estimat
     key = (metric, settings.k_neighbours, case.period)
     if key not in model_cache:
         model_cache[key] = TransitionModel.load(args.library, **settings.model_kwargs())
-    simulator = (SimulatorTransitions(rollouts, start=start, lead=args.lead, beam=args.beam)
+    simulator = (SimulatorTransitions(rollouts, start=start, lead=args.lead, beam=args.beam,
+                                      identify=args.identify and start == "estimated", reanchor=args.reanchor)
                  if args.transitions == "simulator" else None)
     res = run_closed_loop(path, model_cache[key], settings, start_offset=(0.0, args.lateral_offset, 0.0),
                           max_time=case.duration, transitions=args.transitions, simulator=simulator,
@@ -68,6 +69,8 @@ def _run(args, case, path, depth, metric, model_cache, seed=None, start="estimat
     m["path"], m["seed"] = case.name, seed
     tag = "" if args.transitions == "library" else f"_{start}"
     files = save_result(res, args.out, f"{case.name}{'' if seed is None else f'_s{seed}'}_d{depth}_{metric}{tag}")
+    if simulator is not None and simulator.identification is not None:
+        m["limb_strength_estimate"] = simulator.identification.strengths
     print(f"{case.name:8s} {'' if seed is None else f's{seed} '}depth {depth} {m['metric']:9s}: "
           f"goal {'yes' if m['goal_reached'] else 'NO '} t={m['completion_time_s'] or float('nan'):6.1f} s  "
           f"mean {100 * m['mean_distance_m']:5.2f} cm  max {100 * m['max_distance_m']:5.2f} cm  "
@@ -134,6 +137,12 @@ def main(argv=None) -> int:
                     help="transitions simulator: the decision is executed this long after its pose [s] "
                          "(planner_node: decision_deadline x period, 1.0 s at its defaults)")
     ap.add_argument("--beam", type=int, default=0, help="depth 2: roll out only this many first primitives (0: all)")
+    ap.add_argument("--reanchor", action=argparse.BooleanOptionalAction, default=True,
+                    help="transitions simulator with a lead: decide at the execution on the pose tracked then, the "
+                         "tree chained from it (planner_node's reanchor)")
+    ap.add_argument("--identify", action=argparse.BooleanOptionalAction, default=True,
+                    help="transitions simulator from the estimated start: learn the robot's limb strengths from "
+                         "its motion and roll out with them (rollout_node's identify_limbs)")
     ap.add_argument("--twin-seeds", default=None,
                     help="comma-separated seeds: the twin's robot of each (limb strengths, kick spread, yaw "
                          "torque, as frog-twin --seed); default the nominal robot")

@@ -248,6 +248,28 @@ def tree_from_rows(pose, rows, depth, n_primitives):
                   lambda level, vel: rows[offsets[level]:offsets[level + 1]].reshape(-1, p, 6))
 
 
+def reanchor_rows(rows, lead_transition, n_primitives):
+    """Rows whose level 1 spans a lead and a period, made to start where the lead ended.
+
+    ``rows`` (the layout of :func:`tree_from_rows`) were rolled out from a pose observed before
+    the decision is executed; ``lead_transition`` (dx, dy, dyaw in that pose's frame, and the
+    twist then) is where the coast to the execution ended. Level 1 then becomes each first
+    period seen from that end, so the tree can be chained from the pose tracked at the
+    execution instead of the lead's prediction of it; deeper levels are relative to their
+    parents already and stay.
+    """
+    rows = np.array(rows, dtype=float)
+    lead = np.asarray(lead_transition, dtype=float).reshape(-1)
+    if lead.shape != (6,) or not np.all(np.isfinite(lead)):
+        raise ValueError(f"lead transition {lead.tolist()} must be 6 finite values (dx, dy, dyaw, u, v, w)")
+    first = rows[:int(n_primitives)]
+    c, s = np.cos(lead[2]), np.sin(lead[2])
+    dx, dy = first[:, 0] - lead[0], first[:, 1] - lead[1]
+    first[:, 0], first[:, 1] = c * dx + s * dy, -s * dx + c * dy
+    first[:, 2] = first[:, 2] - lead[2]
+    return rows
+
+
 def extrapolate_poses(poses, body_velocities, horizon):
     """Poses after coasting ``horizon`` seconds at constant body velocity and yaw rate.
 

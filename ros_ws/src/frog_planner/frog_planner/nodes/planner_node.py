@@ -89,6 +89,9 @@ _NODE_PARAMS = [
     Param("decision_deadline", 0.7, "transitions simulator: the decision is executed this many periods after "
           "the tick (the rollouts start from the state predicted then); a later response falls back to the "
           "library for that decision", min=0.05, max=0.95, live=True),
+    Param("reanchor", True, "transitions simulator: decide at the deadline on the newest tracked pose, the rollouts' "
+          "tree chained from it (their prediction of the lead replaced by the tracking); false: on the tick's pose "
+          "and the rollouts' prediction of the lead", live=True),
     Param("beam_width", 0, "transitions simulator, depth 2: roll out only the first primitives the library "
           "ranks best, this many; 0 = all 9", min=0, max=9, live=True),
     Param("replan_interval", 0.0, "> 0: the paper's asynchronous loop: decide this often [s] on the mean of the "
@@ -531,7 +534,8 @@ class PlannerNode(Node):
                     reason = f"rollout call failed: {exc}"
                 else:
                     self.last_rollout_s = float(response.compute_time)
-                    expander, reason = RolloutClient.expander(response, self.model.primitive_names, pend["depth"])
+                    expander, reason = RolloutClient.expander(response, self.model.primitive_names, pend["depth"],
+                                                              self.cfg["reanchor"])
             else:
                 reason = (f"rollouts missed the deadline ({self.cfg['decision_deadline']:.2f} periods = "
                           f"{self.cfg['decision_deadline'] * self.settings.period:.2f} s)")
@@ -546,7 +550,8 @@ class PlannerNode(Node):
             return
         try:
             if expander is not None:
-                d = self.planner.decide(pend["pose"], pend["velocity"], expander)
+                pose, velocity = self.odom if self.cfg["reanchor"] else (pend["pose"], pend["velocity"])
+                d = self.planner.decide(pose, velocity, expander)
                 self.simulator_decisions += 1
                 note = f"following (simulator, depth {pend['depth']}, lead {pend['lead']:.4f} s)"
             else:

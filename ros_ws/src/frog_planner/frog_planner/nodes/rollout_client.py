@@ -1,8 +1,8 @@
 """planner_node's side of ``transitions: simulator``: asking ``frog/rollouts`` for a decision's tree.
 
 What the robot can know goes into the request (DESIGN.md, "Planning modes"): the tracked
-pose and body twist, and how long ago each limb was fired, from what the bridge wrote
-(``frog/bridge/sent``, LimbActivation stamped at the write). The request's ``lead`` coasts
+pose (with its stamp) and body twist, and how long ago each limb was fired, from what the
+bridge wrote (``frog/bridge/sent``, LimbActivation stamped at the write). The request's ``lead`` coasts
 that state from the pose's capture stamp to the moment the decision will be executed, so
 the tree starts where the robot will be when it fires.
 """
@@ -14,7 +14,7 @@ import math
 import numpy as np
 from geometry_msgs.msg import Pose2D, Twist
 
-from frog_planner.core.tree_search import check_rows, tree_from_rows
+from frog_planner.core.tree_search import check_rows, reanchor_rows, tree_from_rows
 
 #: A limb fired longer ago than this has relaxed (the actuation model's recovery is ~1-2 s).
 FIRING_MEMORY_S = 10.0
@@ -47,6 +47,7 @@ class RolloutClient:
         req = self._Request(pose=Pose2D(x=float(pose[0]), y=float(pose[1]), theta=float(pose[2])),
                             period=float(period), depth=int(depth), lead=float(max(lead, 0.0)),
                             first_primitives=list(first_primitives))
+        req.stamp = at.to_msg()            # the pose's: the server learns the limbs from consecutive ones
         t = Twist()
         t.linear.x, t.linear.y, t.angular.z = (float(v) for v in twist)
         req.twist = t
@@ -62,8 +63,12 @@ class RolloutClient:
             self.client.remove_pending_request(future)
 
     @staticmethod
-    def expander(response, names, depth: int):
-        """The search's expander from a successful response, or (None, reason)."""
+    def expander(response, names, depth: int, reanchor: bool = False):
+        """The search's expander from a successful response, or (None, reason).
+
+        It chains the tree from the pose the search gives it: the request's pose, or with
+        ``reanchor`` the pose tracked when the decision is executed (the response's
+        ``lead_transition`` takes the lead out of level 1)."""
         if not response.success:
             return None, f"rollouts refused: {response.message}"
         if list(response.primitive_names) != list(names):
@@ -79,6 +84,11 @@ class RolloutClient:
             return None, str(exc)
         if not np.any(np.all(np.isfinite(rows[-len(names) ** depth:]), axis=1)):
             return None, "the rollouts returned no finite leaf"
+        if reanchor:
+            try:
+                rows = reanchor_rows(rows, response.lead_transition, len(names))
+            except ValueError as exc:
+                return None, str(exc)
         return (lambda pose, velocity, d: tree_from_rows(pose, rows, d, len(names))), None
 
 

@@ -67,31 +67,61 @@ class SimulatorTransitions:
         ``decision_deadline`` x period); the rollouts coast this long first.
     beam : int
         Depth 2: roll out only this many first primitives, best by the library (0: all).
+    identify : bool
+        Estimated start: learn the robot's limb strengths from its motion between decisions
+        (:class:`~frog_sim.core.limb_identification.LimbIdentification`) and roll out with them.
+    reanchor : bool
+        Decide at the execution, on the pose tracked then, with the tree rolled out from the
+        observation ``lead`` earlier chained from that pose (planner_node's ``reanchor``); false:
+        decide on the observation's pose with the tree's own prediction of the lead.
     """
 
-    def __init__(self, rollouts, start: str = "estimated", lead: float = 0.0, beam: int = 0):
+    def __init__(self, rollouts, start: str = "estimated", lead: float = 0.0, beam: int = 0,
+                 identify: bool = False, reanchor: bool = False):
         if start not in ROLLOUT_STARTS:
             raise ValueError(f"rollout start {start!r} unknown; expected one of {ROLLOUT_STARTS}")
         if not (np.isfinite(lead) and 0.0 <= lead <= 5.0):
             raise ValueError(f"lead {lead!r} s must be in [0, 5]")
         if not 0 <= int(beam) <= 9:
             raise ValueError(f"beam {beam!r} must be in 0-9")
+        if identify and start != "estimated":
+            raise ValueError("limb identification learns from the estimated start; the exact start has none")
         self.rollouts, self.start, self.lead, self.beam = rollouts, start, float(lead), int(beam)
+        self.reanchor = bool(reanchor)
+        self.identification = None
+        if identify:
+            from frog_sim.core.limb_identification import LimbIdentification
+            self.identification = LimbIdentification(rollouts)
+
+    def reset(self) -> None:
+        """A new run: the nominal robot, nothing learned."""
+        self.rollouts.set_limb_strength(None)
+        if self.identification is not None:
+            self.identification.reset()
 
     def expander(self, sim, planner, pose, twist):
-        """The expander for :meth:`Planner.decide` at this instant of ``sim`` (observed ``pose``, ``twist``)."""
+        """The expander for :meth:`Planner.decide` from this instant of ``sim`` (observed ``pose``,
+        ``twist``): it chains the tree from the pose it is given (with ``reanchor``: the pose at
+        the execution, ``lead`` later; else this one)."""
         depth = planner.depth
         if not 1 <= depth <= MAX_SIMULATOR_DEPTH:
             raise ValueError(f"simulator transitions support depth 1-{MAX_SIMULATOR_DEPTH}, not {depth}")
         ro = self.rollouts
-        start = (ro.start_from_simulation(sim) if self.start == "exact"
-                 else ro.estimated_start(pose, twist, firing_times(sim), now=sim.time))
+        if self.start == "exact":
+            start = ro.start_from_simulation(sim)
+        elif self.identification is not None:
+            start = self.identification.start(sim.time, pose, twist, firing_times(sim))
+        else:
+            start = ro.estimated_start(pose, twist, firing_times(sim), now=sim.time)
         firsts = ()
         if depth == 2 and 0 < self.beam < planner.model.n_primitives:
             ranked = planner.rank_first_actions(pose, twist)
             firsts = [planner.model.primitive_names[i] for i in ranked[:self.beam]]
-        rows, _ = ro.decision_tree(start, planner.settings.period, depth, self.lead, firsts)
+        rows, _ = ro.decision_tree(start, planner.settings.period, depth, self.lead, firsts,
+                                   from_lead_end=self.reanchor)
         n = planner.model.n_primitives
+        if self.reanchor:
+            return lambda p, v, d: tree_from_rows(p, rows, d, n)
         return lambda p, v, d: tree_from_rows(start.pose, rows, d, n)
 
 
@@ -167,6 +197,7 @@ def run_closed_loop(path: Path, model: TransitionModel, settings: PlannerSetting
         if simulator is None:
             from frog_sim.core.rollouts import Rollouts
             simulator = SimulatorTransitions(Rollouts(threads=1))
+        simulator.reset()
     period = settings.period
     lead = simulator.lead if transitions == "simulator" else 0.0
     if lead >= period:
@@ -198,6 +229,11 @@ def run_closed_loop(path: Path, model: TransitionModel, settings: PlannerSetting
         twist = [st.body_velocity[0], st.body_velocity[1], st.yaw_rate]
         t0 = time.perf_counter()
         expander = simulator.expander(sim, planner, pose, twist) if transitions == "simulator" else None
+        if expander is not None and simulator.reanchor:        # decide at the execution, on its pose
+            advance(k * period + lead)
+            st = sim.rigid_body_state()
+            pose = [st.com[0], st.com[1], st.heading]
+            twist = [st.body_velocity[0], st.body_velocity[1], st.yaw_rate]
         d = planner.decide(pose, twist, expander)
         decide_s.append(time.perf_counter() - t0)
         decisions.append({"time": sim.time, "primitive": d.name, "primitive_id": d.primitive_id,
