@@ -76,6 +76,17 @@ def compare_table(results: list[dict]) -> str:
     if sim:
         lines.append("Simulator decisions / library fallbacks: " + "; ".join(
             f"{k} {sum(cell[k, p][4] for p in paths)} / {sum(cell[k, p][3] for p in paths)}" for k in sim) + ".")
+        made = sum(cell[k, p][4] for k in sim for p in paths)
+        missed = sum(cell[k, p][3] for k in sim for p in paths)
+        if made + missed:
+            share = made / (made + missed)
+            lines.append(f"Decisions made within the period: {100 * share:.1f} % (target >= 99 %: "
+                         f"{'met' if share >= 0.99 else 'NOT met'}).")
+        if "project" in kinds:
+            best_sim = min(sim, key=lambda k: sum(cell[k, p][0] for p in paths))
+            worse = [p for p in paths if cell[best_sim, p][0] > cell["project", p][0]]
+            lines.append(f"Best simulator mode {best_sim} against the library mode (project): worse on "
+                         f"{', '.join(worse) if worse else 'no path'} (target: none).")
     if "paper" in kinds:
         others = [k for k in kinds if k != "paper"]
         best = min(others, key=lambda k: sums[k]) if others else None

@@ -32,6 +32,9 @@ def test_table_sums_the_seed_means_and_judges_the_targets():
     worse = [p for p in ("line", "sine") if means[p, best].mean() > means[p, "paper"].mean()]
     assert f"worse than the paper planner: {', '.join(worse) if worse else 'none'}" in text
     assert "sim-d1 20 / 4" in text           # 2 paths x 2 seeds x (5 decisions, 1 fallback)
+    assert "Decisions made within the period: 83.3 % (target >= 99 %: NOT met)" in text
+    worse_sim = [p for p in ("line", "sine") if means[p, "sim-d1"].mean() > means[p, "project"].mean()]
+    assert f"against the library mode (project): worse on {', '.join(worse_sim) or 'no path'}" in text
     assert "(2/2)" in text
 
 
