@@ -195,9 +195,10 @@ def test_planner_decision_fields(tiny):
     np.testing.assert_allclose(d.predicted_pose[:2], ref_step((0.1, 0.01, 0.0), table[d.primitive_id][n[0]])[0][:2])
     assert not d.goal_reached
     assert planner.decide([0.395, 0.0, 0.0], [0.02, 0.0, 0.0]).goal_reached
-    # The default planner measures heading against the path point 0.1 m ahead: from (0.1, 0.01)
-    # that is (0.2, 0), atan(0.01 / 0.1) to the right of the heading.
-    d = Planner(model, path, PlannerSettings(depth=2)).decide([0.1, 0.01, 0.0], [0.02, 0.0, 0.0])
+    # With a heading look-ahead the planner measures heading against the path point 0.1 m ahead:
+    # from (0.1, 0.01) that is (0.2, 0), atan(0.01 / 0.1) to the right of the heading.
+    ahead = PlannerSettings(depth=2, heading_lookahead=0.1, w_heading=W_B)
+    d = Planner(model, path, ahead).decide([0.1, 0.01, 0.0], [0.02, 0.0, 0.0])
     assert d.current_cost_terms.heading == pytest.approx(W_B * math.atan(0.01 / 0.1))
 
 
@@ -324,7 +325,7 @@ def test_planner_does_not_wait_forever_at_rest(synthetic, depth):
     weights = CostWeights(distance=500.0, heading=0.0, progress=0.0)
     rest = [0.0, 0.0, 0.0]
     kw = dict(w_distance=500.0, w_heading=0.0, w_progress=0.0, depth=depth, heading_lookahead=0.0,
-              velocity_lookahead=0.0)
+              velocity_lookahead=0.0, allow_no_action=True, stage_cost=False)
     paper = Planner(model, path, PlannerSettings(stall_speed=0.0, **kw))
     assert paper.decide([0.0, 0.0, 0.0], rest).name == "I"
     d = Planner(model, path, PlannerSettings(**kw)).decide([0.0, 0.0, 0.0], rest)
@@ -351,7 +352,7 @@ def test_no_action_can_be_left_out_while_following(synthetic, depth):
     model = _drifting_model(synthetic.BITS)
     path = line_path(length=0.3)
     kw = dict(w_distance=500.0, w_heading=0.0, w_progress=0.0, depth=depth, heading_lookahead=0.0,
-              velocity_lookahead=0.0, allow_no_action=False)
+              velocity_lookahead=0.0, allow_no_action=False, stage_cost=False)
     res = search(model, path, [0.0, 0.0, 0.0], [0.03, 0.0, 0.0], depth, CostWeights(500.0, 0.0, 0.0))
     span = 9 ** (depth - 1)
     cheapest = min(res.leaf_total[i] for i in range(9 ** depth) if i // span != 8)

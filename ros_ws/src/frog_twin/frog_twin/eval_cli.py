@@ -125,8 +125,9 @@ def main(argv=None) -> int:
                          "logged start pose at its decision period")
     add_arguments(ap, PlannerSettings)
     ap.add_argument("--paper-cost", action="store_true",
-                    help="the paper's exact planner: eq. 19 at the leaf, tangent heading, weights 500/50/300, "
-                         "nearest-state transitions (overrides the weight, look-ahead and correction options)")
+                    help="the paper's exact planner: eq. 19 at the leaf, depth 1, tangent heading, weights 500/50/300, "
+                         "nearest-state transitions (overrides the depth, weight, look-ahead and correction options; "
+                         "--compare still varies the depth)")
     ap.add_argument("--transitions", choices=["library", "simulator"], default="library",
                     help="predictions of the search: the library (paper) or the simulator's batched rollouts "
                          "(depth <= 2)")
@@ -161,8 +162,7 @@ def main(argv=None) -> int:
     try:
         args.settings = from_arguments(PlannerSettings, args)
         if args.paper_cost:
-            args.settings = PlannerSettings.paper(period=args.settings.period, depth=args.settings.depth,
-                                                  metric=args.settings.metric,
+            args.settings = PlannerSettings.paper(period=args.settings.period, metric=args.settings.metric,
                                                   k_neighbours=args.settings.k_neighbours)
         seeds = [None] if args.twin_seeds is None else [int(s) for s in args.twin_seeds.split(",")]
     except ValueError as exc:

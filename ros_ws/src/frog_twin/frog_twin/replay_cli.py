@@ -59,11 +59,10 @@ def _merged(first: dict, then: dict) -> dict:
 
 def replay_planner_settings(args, period: float) -> PlannerSettings:
     """The planner of a replay at the run's ``period``: the paper's (``--paper-cost``: eq. 19 at the
-    leaf with weights 500/50/300, tangent heading, relative metric, nearest-state transitions; see
+    leaf with weights 500/50/300, depth 1, tangent heading, relative metric, nearest-state transitions; see
     :meth:`PlannerSettings.paper`) or the project's settings from the command line."""
     if args.paper_cost:
-        return PlannerSettings.paper(period=period, depth=args.settings.depth, metric="relative",
-                                     k_neighbours=args.settings.k_neighbours)
+        return PlannerSettings.paper(period=period, metric="relative", k_neighbours=args.settings.k_neighbours)
     return dataclasses.replace(args.settings, period=period)
 
 

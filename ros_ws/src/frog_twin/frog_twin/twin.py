@@ -556,8 +556,9 @@ def _main(argv=None) -> int:
     what.add_argument("--replay-all", type=Path, metavar="DIR",
                       help="replay every <run>.csv of DIR that has a <run>_path.csv; one summary table")
     rg.add_argument("--paper-cost", action="store_true",
-                    help="the paper's planner, as the robot ran it: eq. 19 at the leaf, weights 500/50/300, tangent "
-                         "heading, relative metric (overrides the weight, look-ahead and correction options)")
+                    help="the paper's planner, as the robot ran it: eq. 19 at the leaf, depth 1, weights 500/50/300, "
+                         "tangent heading, relative metric (overrides the depth, weight, look-ahead and correction "
+                         "options)")
     rg.add_argument("--seeds", type=int, default=None,
                     help="twin runs per log with seeds --seed, --seed+1, ... (pooled in the summary); also per "
                          "case of --fault-campaign and --planner-compare (default 1; 3 for a full --fault-campaign)")

@@ -122,8 +122,9 @@ def test_simulator_transitions_from_the_estimate_and_a_lead(library):
     """From what a robot knows (pose, twist, firing times), with the decision executed 1 s after
     its observation (planner_node's deadline): each decision's predicted pose, one period after
     the execution, is where the nominal robot then is, within what the estimate leaves out (the
-    limbs' own motion: bench/planner_rollouts.py, < 1 mm and 1 deg one period on), and the run
-    executes at the observation + lead (the decision times are the period's multiples)."""
+    limbs' own motion relative to the body: bench/planner_rollouts.py, up to 1.5 mm and 1.2 deg
+    one period on when estimated mid-stroke, as 1 s before a firing is), and the run executes at
+    the observation + lead (the decision times are the period's multiples)."""
     from frog_sim.core.rollouts import Rollouts
     from frog_twin.core.evaluation import SimulatorTransitions
     model = TransitionModel.load(library, period=PERIOD, gradient_correction=True)
@@ -140,7 +141,7 @@ def test_simulator_transitions_from_the_estimate_and_a_lead(library):
         k = int(np.argmin(np.abs(res.time - at)))
         assert res.time[k] == pytest.approx(at, abs=1e-6)
         err = np.asarray(dec["predicted_pose"]) - res.pose[k]
-        assert np.hypot(*err[:2]) < 1e-3 and abs(err[2]) < math.radians(1.0), (dec["time"], err)
+        assert np.hypot(*err[:2]) < 2e-3 and abs(err[2]) < math.radians(2.0), (dec["time"], err)
     with pytest.raises(ValueError, match="shorter than the period"):
         run_closed_loop(path, model, PlannerSettings(period=PERIOD), max_time=2.0, transitions="simulator",
                         simulator=SimulatorTransitions(ro, lead=PERIOD))

@@ -31,8 +31,8 @@ class PlannerSettings(Settings):
 
     period: float = setting(1.5, "primitive period T (between library samples, transitions are interpolated)",
                              min=0.05, max=10.0, unit="s")
-    depth: int = setting(1, "tree search depth H (the paper found 1 best on hardware)", min=1, max=MAX_DEPTH,
-                          live=True)
+    depth: int = setting(2, "tree search depth H (the paper found 1 best on hardware; with stage_cost 2 is best in "
+                          "the twin)", min=1, max=MAX_DEPTH, live=True)
     metric: str = setting("euclidean", "nearest-neighbour metric: scaled euclidean (KD-tree) or the paper's "
                            "relative metric", choices=("euclidean", "relative"))
     k_neighbours: int = setting(1, "nearest library states averaged", min=1, max=64, flags=("--k",))
@@ -41,23 +41,23 @@ class PlannerSettings(Settings):
                            "and y forward, its yaw rate in deg/s; for replaying their runs)", choices=LOOKUPS)
     gradient_correction: bool = setting(True, "correct the nearest state's transitions to first order for the "
                                          "velocity difference (library-fitted slopes); false = the paper")
-    w_distance: float = setting(500.0, "eq. 19 weight w_a of the distance to the path", min=0.0, max=1e6, unit="1/m",
-                                 live=True, flags=("--w-a",))
-    w_heading: float = setting(50.0, "eq. 19 weight w_b of the heading error", min=0.0, max=1e6, unit="1/rad",
-                               live=True, flags=("--w-b",))
+    w_distance: float = setting(8000.0, "eq. 19 weight w_a of the distance to the path (paper 500)", min=0.0,
+                                 max=1e6, unit="1/m", live=True, flags=("--w-a",))
+    w_heading: float = setting(100.0, "eq. 19 weight w_b of the heading error (paper 50)", min=0.0, max=1e6,
+                               unit="1/rad", live=True, flags=("--w-b",))
     w_progress: float = setting(300.0, "eq. 19 weight w_c of (1 - progress)", min=0.0, max=1e6, live=True,
                                  flags=("--w-c",))
-    heading_lookahead: float = setting(0.1, "heading error against the path this far ahead; 0 = the paper's "
+    heading_lookahead: float = setting(0.0, "heading error against the path this far ahead; 0 = the paper's "
                                         "path tangent at the closest point", min=0.0, max=1.0, unit="m", live=True)
-    velocity_lookahead: float = setting(1.5, "cost each leaf pose extrapolated by its predicted velocities "
+    velocity_lookahead: float = setting(0.0, "cost each leaf pose extrapolated by its predicted velocities "
                                         "over this time; 0 = the paper (cost at the leaf)", min=0.0, max=10.0,
                                         unit="s", live=True)
     yaw_rate_weight: float = setting(0.0, "weight per rad/s of |predicted yaw rate - path curvature x speed| "
                                       "at the leaf; 0 = the paper", min=0.0, max=1e6, unit="s/rad", live=True,
                                       flags=("--w-r",))
-    stage_cost: bool = setting(False, "cost a sequence at each of its period ends, summed (false: at its leaf "
+    stage_cost: bool = setting(True, "cost a sequence at each of its period ends, summed (false: at its leaf "
                                 "only, the paper); depth > 1", live=True)
-    allow_no_action: bool = setting(True, "choose 'no action' while following; false: every period fires limbs "
+    allow_no_action: bool = setting(False, "choose 'no action' while following; false: every period fires limbs "
                                      "until the goal (a cost weighing the distance far above the progress would "
                                      "otherwise wait on the path)", live=True)
     stall_speed: float = setting(0.002, "standing still (below this planar speed and 0.01 rad/s) short of the "
@@ -67,7 +67,8 @@ class PlannerSettings(Settings):
     @classmethod
     def paper(cls, **overrides) -> "PlannerSettings":
         """The paper's exact planner: eq. 19 at the leaf, tangent heading, nearest-state transitions."""
-        values = {"heading_lookahead": 0.0, "velocity_lookahead": 0.0, "yaw_rate_weight": 0.0,
+        values = {"heading_lookahead": 0.0, "velocity_lookahead": 0.0, "yaw_rate_weight": 0.0, "depth": 1,
+                  "stage_cost": False, "allow_no_action": True,
                   "stall_speed": 0.0, "gradient_correction": False, "w_distance": 500.0, "w_heading": 50.0,
                   "w_progress": 300.0}
         values.update(overrides)
