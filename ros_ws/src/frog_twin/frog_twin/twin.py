@@ -183,6 +183,9 @@ ESSENTIAL_NODES = ("sim_node", "robot_emulator")
 # The timeout holds in real mode too (its own ready pattern: frog_twin.real).
 RESTART_READY = {"tracker_node": "camera model from camera_info"}
 RESTART_READY_TIMEOUT_S = 15.0
+#: The planner starts only once rollout_node serves (transitions simulator): a run started before
+#: made every decision a library fallback while numba compiled the rollouts (about a minute, once).
+ROLLOUTS_READY_S = 600.0
 #: topics every twin run has (the bridge's are absent with --direct): the recorder's subscriptions to them
 PLANNER_TOPICS = ("/frog/primitive", "/frog/planner/status")
 SERIAL_NODES = ("robot_emulator", "bridge_node")
@@ -320,6 +323,9 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
                 watch.wait(lambda: link.exists(), 60, "the robot emulator's serial device", supervisor.processes())
         watch.wait(lambda: watch.odom_count >= 5, 120, "odometry on /frog/odom (camera + tracker running)",
                    supervisor.processes())
+        if "rollout_node" in supervisor.names():       # compiled on first use: minutes on a fresh clone
+            watch.wait(lambda: "ready in" in supervisor.process("rollout_node").log_text(), ROLLOUTS_READY_S,
+                       "rollout_node ready (the rollouts are compiled on first use)", supervisor.processes())
         # the metrics start at the planner's first decision: the recorder must hear it
         recorded = ("/frog/sim/odom", *PLANNER_TOPICS)     # (no bridge topics with --direct)
         watch.wait(lambda: watch.subscribed("recorder", recorded), 60,
