@@ -127,7 +127,6 @@ def test_the_limbs_are_learned_from_consecutive_requests_and_forgotten_on_reques
     from soft_robot_interfaces.srv import Rollouts
     from std_srvs.srv import Trigger
 
-    from frog_common.primitives import LIMB_NAMES
     from frog_sim.core.simulation import FrogSimulation
     truth = {"FL": 1.2, "FR": 0.75, "BL": 1.1, "BR": 0.95}
     node = launch("rollout_node", params={"threads": 1})
@@ -145,12 +144,7 @@ def test_the_limbs_are_learned_from_consecutive_requests_and_forgotten_on_reques
 
     def request(sim, stamped=True):
         st = sim.rigid_body_state()
-        fired = []
-        for limb in LIMB_NAMES:
-            times = sim.schedule.times(limb)
-            times = times[times <= sim.time + 1e-12]
-            if times.size and sim.time - times[-1] < 10.0:
-                fired.append((limb, sim.time - float(times[-1])))
+        fired = [(limb, sim.time - t) for limb, t in sim.last_firings().items() if sim.time - t < 10.0]
         req = _request(1, fired=fired, pose=(*st.com, st.heading), twist=(*st.body_velocity, st.yaw_rate),
                        period=1.43)
         if stamped:

@@ -415,11 +415,8 @@ class Rollouts:
         """
         integ = sim.integrator
         last = np.full(_N_LIMBS, -np.inf)
-        for limb in LIMB_NAMES:
-            times = sim.schedule.times(limb)
-            times = times[times <= sim.time]
-            if times.size:
-                last[LIMB_IDS[limb]] = times[-1] - sim.time
+        for limb, t in sim.last_firings().items():
+            last[LIMB_IDS[limb]] = t - sim.time
         st = sim.rigid_body_state()
         return RolloutStart(x=integ.x.copy(), v=integ.v.copy(), v_old=integ._state.v_old.copy(),
                             last_firing=last, pose=np.array([*st.com, st.heading]),

@@ -406,6 +406,17 @@ class FrogSimulation:
             return self._schedule
         return self._schedule.merged(self._gait_schedule(until=self._horizon))
 
+    def last_firings(self) -> dict:
+        """Each limb's last firing up to now [s] (the simulator's clock; limbs never fired are left
+        out): what a robot's planner knows from what its bridge fired."""
+        out = {}
+        for limb in LIMB_NAMES:
+            times = self.schedule.times(limb)
+            times = times[times <= self.time + 1e-12]
+            if times.size:
+                out[limb] = float(times[-1])
+        return out
+
     # ------------------------------------------------------------------ state
     @property
     def time(self) -> float:

@@ -17,7 +17,7 @@ from typing import Optional
 
 import numpy as np
 
-from frog_common.primitives import LIMB_NAMES, primitive_name
+from frog_common.primitives import primitive_name
 from frog_planner.core.paths import Path, ellipse_path, line_path, sinusoid_path
 from frog_planner.core.planner import Planner
 from frog_planner.core.settings import PlannerSettings
@@ -38,17 +38,6 @@ ROLLOUT_STARTS = ("estimated", "exact")
 
 #: Deepest tree the simulator source expands (9^2 = 81 simulated periods per decision).
 MAX_SIMULATOR_DEPTH = 2
-
-
-def firing_times(sim) -> dict:
-    """Each limb's firings up to now on the simulator's clock (what ``frog/bridge/sent`` tells a robot)."""
-    fired = {}
-    for limb in LIMB_NAMES:
-        times = sim.schedule.times(limb)
-        times = times[times <= sim.time + 1e-12]
-        if times.size:
-            fired[limb] = float(times[-1])
-    return fired
 
 
 class SimulatorTransitions:
@@ -110,9 +99,9 @@ class SimulatorTransitions:
         if self.start == "exact":
             start = ro.start_from_simulation(sim)
         elif self.identification is not None:
-            start = self.identification.start(sim.time, pose, twist, firing_times(sim))
+            start = self.identification.start(sim.time, pose, twist, sim.last_firings())
         else:
-            start = ro.estimated_start(pose, twist, firing_times(sim), now=sim.time)
+            start = ro.estimated_start(pose, twist, sim.last_firings(), now=sim.time)
         firsts = ()
         if depth == 2 and 0 < self.beam < planner.model.n_primitives:
             ranked = planner.rank_first_actions(pose, twist)
