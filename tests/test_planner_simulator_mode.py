@@ -98,7 +98,8 @@ def test_decisions_are_the_simulators_rollouts_from_the_coasted_state(launch, pr
     from frog_sim.core.rollouts import Rollouts
     server = launch("rollout_node", params={"threads": 1})
     server.wait_for_log("ready in", timeout=240)
-    node, status, diags, feed_until = _setup(launch, probe, library, reanchor=reanchor)
+    # depth 1: the test rolls out one period itself (the node's default is depth 2)
+    node, status, diags, feed_until = _setup(launch, probe, library, depth=1, reanchor=reanchor)
     feed_until(lambda: sum("simulator, depth 1" in s.message for s in status) >= 2, 60, "two simulator decisions")
     decided = [s for s in status if "simulator, depth 1" in s.message]
     with Rollouts(threads=1) as core:
