@@ -9,9 +9,9 @@ from frog_planner.core.settings import PlannerSettings
 from frog_twin.planner_compare import compare_table, planner_settings
 
 
-def _result(path, planner, seed, mean, finished=True, sim=0, fallbacks=0):
+def _result(path, planner, seed, mean, finished=True, sim=0, fallbacks=0, floor=0.001):
     return {"path": path, "planner": planner, "seed": seed, "mean_distance_m": mean, "finished": finished,
-            "simulator_decisions": sim, "fallbacks": fallbacks, "floor_m": 0.001}
+            "simulator_decisions": sim, "fallbacks": fallbacks, "floor_m": floor}
 
 
 def test_table_sums_the_seed_means_and_judges_the_targets():
@@ -36,6 +36,15 @@ def test_table_sums_the_seed_means_and_judges_the_targets():
     worse_sim = [p for p in ("line", "sine") if means[p, "sim-d1"].mean() > means[p, "project"].mean()]
     assert f"against the library mode (project): worse on {', '.join(worse_sim) or 'no path'}" in text
     assert "(2/2)" in text
+
+
+def test_floor_is_the_lowest_of_the_planners_models():
+    # the project's model turns less tightly (higher floor) than the paper's; the project ran first
+    results = [_result("sine", "project", 1, 0.008, floor=0.0062), _result("sine", "paper", 1, 0.010, floor=0.0035),
+               _result("line", "project", 1, 0.003, floor=float("nan")), _result("line", "paper", 1, 0.005, floor=0.0)]
+    rows = {line.split("|")[1].strip(): line.split("|")[2].strip() for line in compare_table(results).splitlines()
+            if line.startswith("| ") and not line.startswith("| path")}
+    assert rows["sine"] == "0.35" and rows["line"] == "0.00"
 
 
 def test_compared_planners_share_the_period_and_differ_as_specified():
