@@ -56,7 +56,8 @@ def test_recoverable_faults_complete_the_path_with_nothing_fired_on_stale_state(
         assert any(w.startswith(f.label() + ":") for w in done), (f.label(), done)
     assert not rep["injector_failures"], rep["injector_failures"]
     why = {"goal": m["goal_reached"], "progress": m["final_progress"], "stop_reason": rep["stop_reason"],
-           "stale": rep["stale_firings"][:3], "recorder": rep["recorder"], "unclean": m["unclean_stops"]}
+           "stale": rep["stale_firings"][:3], "recorder": rep["recorder"], "unclean": m["unclean_stops"],
+           "stops": m["supervision"]["stops"]}
     assert rep["outcome"] == "completed", (why, stdout[-3000:])
     assert rep["stale_firings"] == [], rep["stale_firings"][:5]
     assert rep["n_firings"] >= 10
@@ -92,7 +93,9 @@ def test_emergency_stops_the_run_cleanly_and_nothing_fires_after_it(small_librar
 def test_a_dead_tracker_stops_the_run_cleanly_after_the_stuck_timeout(small_library, tmp_path):
     m, stdout, _ = _run(small_library, tmp_path, FAULT_CLASSES["dead_node"], "--stuck-timeout", "8")
     rep = m["faults"]
-    assert rep["outcome"] == "stopped", (rep["stop_reason"], stdout[-3000:])
+    why = {"stop_reason": rep["stop_reason"], "stale": rep["stale_firings"][:3], "lost": rep["recorder_lost"],
+           "unclean": m["unclean_stops"], "stops": m["supervision"]["stops"]}
+    assert rep["outcome"] == "stopped", (why, stdout[-3000:])
     assert "has not followed for 8 s" in rep["stop_reason"] and "stale" in rep["stop_reason"], rep["stop_reason"]
     assert rep["stale_firings"] == [] and rep["recorder_lost"] == 0
     assert m["supervision"]["restarts"]["tracker_node"] == 0

@@ -1,6 +1,7 @@
 """Self-test of the harness: a started node is found, stops cleanly, and leaves the graph."""
 
 import os
+import signal
 import time
 
 import pytest
@@ -34,9 +35,13 @@ def test_stop_escalates_when_sigint_is_ignored(launch, tmp_path):
     proc.wait_for_log("up")
     t = time.monotonic()
     proc.stop(sigint_timeout=0.5, sigterm_timeout=5.0)
+    took = time.monotonic() - t
     assert not proc.running()
     assert proc.stop_signal == "SIGTERM" and not proc.stopped_cleanly
-    assert time.monotonic() - t < 5.0
+    assert took < 5.0
+    report = proc.stop_report()      # what the twin's supervision summary keeps per node
+    assert report["signal"] == "SIGTERM" and report["code"] == -signal.SIGTERM, report
+    assert 0.5 <= report["seconds"] <= took + 0.01, (report, took)
 
 
 def test_domains_are_isolated(ros_domain):

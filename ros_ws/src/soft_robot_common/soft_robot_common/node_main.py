@@ -8,6 +8,7 @@ raises :class:`ConfigurationError` for a value it cannot work with, and its ``ma
 from __future__ import annotations
 
 import ctypes
+import faulthandler
 import os
 import signal
 import sys
@@ -22,6 +23,10 @@ from .parameters import ConfigurationError, undeclared_overrides
 from .processes import PARENT_PID_ENV
 
 PR_SET_PDEATHSIG = 1     # <linux/prctl.h>
+# A teardown (executor shutdown, close, destroy_node) still running after this long dumps every
+# thread's traceback to stderr (the node's log), so a hang in the middleware is diagnosable; it is
+# below NodeProcess.stop's 10 s wait for SIGINT, so the dump is written before the escalation.
+TEARDOWN_DUMP_S = 8.0
 
 
 class _StopRequest:
@@ -166,12 +171,16 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
     finally:
         stop.starting = False
         stop.disarm()
-        if spinner is not None:
-            spinner.shutdown(timeout_sec=5.0)
-        if node is not None:
-            if close is not None:
-                close(node)
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        faulthandler.dump_traceback_later(TEARDOWN_DUMP_S, exit=False)
+        try:
+            if spinner is not None:
+                spinner.shutdown(timeout_sec=5.0)
+            if node is not None:
+                if close is not None:
+                    close(node)
+                node.destroy_node()
+            if rclpy.ok():
+                rclpy.shutdown()
+        finally:
+            faulthandler.cancel_dump_traceback_later()
     return 0

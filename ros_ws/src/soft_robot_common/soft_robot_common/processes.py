@@ -82,6 +82,7 @@ class NodeProcess:
                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                      start_new_session=True, preexec_fn=preexec_fn)
         self.stop_signal: Optional[str] = None   # which signal finally ended it
+        self.stop_seconds: Optional[float] = None  # how long stop() took
 
     @property
     def pid(self) -> int:
@@ -121,6 +122,7 @@ class NodeProcess:
 
     def stop(self, sigint_timeout: float = 10.0, sigterm_timeout: float = 5.0) -> int:
         """SIGINT the process group, escalating to SIGTERM then SIGKILL; return the code."""
+        t0 = time.monotonic()
         for sig, timeout in ((signal.SIGINT, sigint_timeout), (signal.SIGTERM, sigterm_timeout),
                              (signal.SIGKILL, 10.0)):
             if not self.running():
@@ -137,7 +139,13 @@ class NodeProcess:
         except (ProcessLookupError, PermissionError):
             pass
         self._log.close()
+        self.stop_seconds = time.monotonic() - t0
         return self.proc.returncode
+
+    def stop_report(self) -> dict:
+        """How the last stop() went: the signal that ended it, the exit code, the seconds it took."""
+        return {"signal": self.stop_signal, "code": self.proc.returncode,
+                "seconds": None if self.stop_seconds is None else round(self.stop_seconds, 2)}
 
     @property
     def stopped_cleanly(self) -> bool:

@@ -199,5 +199,6 @@ class Supervisor:
 
     def summary(self) -> dict:
         return {"restarts": {s.name: s.restarts for s in self._slots.values()},
-                "events": [e.as_dict() for e in self.events], "stop_reason": self.stop_reason}
+                "events": [e.as_dict() for e in self.events], "stop_reason": self.stop_reason,
+                "stops": {s.name: s.process.stop_report() for s in self._slots.values()}}
 

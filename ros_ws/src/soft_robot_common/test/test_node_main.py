@@ -1,6 +1,7 @@
-"""run_node's start-up stop: a SIGINT while the node is constructed ends the process, also when
-the first KeyboardInterrupt is raised inside a callback from C (which Python prints and drops,
-as llvmlite's object-cache callback does while numba compiles a node's kernels)."""
+"""run_node's stops: a SIGINT while the node is constructed ends the process, also when the first
+KeyboardInterrupt is raised inside a callback from C (which Python prints and drops, as
+llvmlite's object-cache callback does while numba compiles a node's kernels); a teardown that
+hangs leaves its traceback in the node's log."""
 
 import signal
 import subprocess
@@ -51,3 +52,42 @@ def test_sigint_during_a_start_up_that_swallows_exceptions_still_stops_it():
     assert code == 0, err
     assert "stopped by signal during start-up" in err
     assert took < 5.0, f"stopped {took:.1f} s after SIGINT"
+
+
+HUNG_TEARDOWN = textwrap.dedent("""
+    import sys, time
+    from rclpy.node import Node
+    from soft_robot_common import node_main
+
+    node_main.TEARDOWN_DUMP_S = 0.5
+    class Ready(Node):
+        def __init__(self):
+            super().__init__("hung_teardown")
+            print("ready", flush=True)
+
+    def close_that_hangs(node):
+        time.sleep(1.5)
+
+    sys.exit(node_main.run_node(Ready, close=close_that_hangs))
+""")
+
+
+def test_a_teardown_that_hangs_dumps_its_traceback_and_a_quick_one_does_not():
+    def run(script):
+        proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+        try:
+            assert proc.stdout.readline().strip() == "ready"
+            proc.send_signal(signal.SIGINT)
+            code = proc.wait(timeout=10)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        return code, proc.stderr.read()
+
+    code, err = run(HUNG_TEARDOWN)
+    assert code == 0, err      # slow, not dead: the stop still completes
+    assert "close_that_hangs" in err and "Thread" in err, err
+    code, err = run(HUNG_TEARDOWN.replace("time.sleep(1.5)", "pass"))
+    assert code == 0 and "close_that_hangs" not in err, err
