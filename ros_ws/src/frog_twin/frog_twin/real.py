@@ -33,6 +33,7 @@ from soft_robot_common.graph import load_graph
 from soft_robot_common.tool_signals import redirect_stop_signals
 
 from frog_twin.core import twin_report
+from frog_twin.core.metrics import best_window_rate
 from frog_twin.core.twin_recording import read_twin_recording
 from frog_common.se2 import yaw_of
 
@@ -185,19 +186,22 @@ def preflight(args, watch: RealWatch, procs, path, timeout: float = PREFLIGHT_TI
         return pred()
 
     checks = []
-    # 1. the camera's rate
+    # 1. the camera's rate: the best whole window within the pre-flight (the first seconds, while
+    # every node loads, may be slow on a busy machine; a camera too slow for the rate is so in all)
+    def rate():
+        return best_window_rate([t for t, _, _ in watch.frames], RATE_WINDOW_S)
+
     got_frames = wait(lambda: len(watch.frames) >= 1)
     if not got_frames:
         checks.append(Check("camera", False, f"camera {args.camera}: no frame (camera/camera_info) within "
                                              f"{timeout:.0f} s (see camera_node.log)"))
     else:
-        start = watch.frames[0][0]
-        wait(lambda: time.monotonic() - start >= RATE_WINDOW_S)
-        n = sum(1 for t, _, _ in watch.frames if start <= t <= start + RATE_WINDOW_S)
-        rate = (n - 1) / RATE_WINDOW_S
-        ok = rate >= RATE_FRACTION * fps
-        checks.append(Check("camera", ok, f"camera {args.camera}: {rate:.1f} frames/s "
-                                          f"({'at least' if ok else 'below'} {RATE_FRACTION:.0%} of its {fps:g} Hz)"))
+        wait(lambda: (rate() or 0.0) >= RATE_FRACTION * fps)
+        best = rate() or 0.0
+        ok = best >= RATE_FRACTION * fps
+        checks.append(Check("camera", ok, f"camera {args.camera}: {best:.1f} frames/s in the best "
+                                          f"{RATE_WINDOW_S:g} s ({'at least' if ok else 'below'} "
+                                          f"{RATE_FRACTION:.0%} of its {fps:g} Hz)"))
     # 2. image sizes of the calibration files
     frame_size = (watch.frames[-1][1], watch.frames[-1][2]) if watch.frames else None
     camera = None

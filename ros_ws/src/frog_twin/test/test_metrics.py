@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from frog_twin.core.metrics import distance_to_polyline, latency_stats, pose_errors, tracking_metrics
+from frog_twin.core.metrics import (best_window_rate, distance_to_polyline, latency_stats, pose_errors,
+                                   tracking_metrics)
 
 
 def test_distance_to_a_polyline_is_geometry():
@@ -122,3 +123,16 @@ def test_finish_time_within_tolerance_or_past_the_finish_line():
     assert finish_time(t, wide, path, goal_tolerance=0.03) == pytest.approx(40.1)
     short = np.c_[0.005 * t, np.zeros_like(t)]             # not even at the end after 45 s
     assert finish_time(t, short, path) is None
+
+
+def test_best_window_rate_counts_frames_in_the_best_whole_window():
+    steady = np.arange(0, 5.0, 1 / 15)                       # 15 Hz for 5 s
+    assert best_window_rate(steady, 2.0) == pytest.approx(15.0)
+    assert best_window_rate(steady[steady < 1.9], 2.0) is None      # no whole window yet
+    # a 1.5 s stall after the first frames (start-up contention): the best window is after it
+    stalled = np.r_[steady[steady < 0.5], steady[steady > 2.0]]
+    assert best_window_rate(stalled, 2.0) == pytest.approx(15.0)
+    first_window = np.sum(stalled <= stalled[0] + 2.0) - 1
+    assert first_window / 2.0 < 0.8 * 15                      # what a first-window check would have seen
+    assert best_window_rate(np.arange(0, 6.0, 1 / 10), 2.0) == pytest.approx(10.0)   # a 10 Hz camera stays 10
+    assert best_window_rate(np.random.default_rng(1).permutation(steady), 2.0) == pytest.approx(15.0)

@@ -175,3 +175,17 @@ def latency_stats(sent_times, fired_times) -> dict:
         return {"n": 0, "median_s": None, "p99_s": None, "max_s": None}
     return {"n": int(len(lat)), "median_s": float(np.median(lat)), "p99_s": float(np.percentile(lat, 99)),
             "max_s": float(lat.max())}
+
+
+def best_window_rate(times, window: float) -> float | None:
+    """The highest rate [1/s] of events ``times`` [s] in any complete window of ``window`` s
+    starting at an event: (events in [t_i, t_i + window]) - 1, over ``window``; None until the
+    events span a whole window. A start-up stall (the pre-flight's first seconds, when every
+    node is loading) lowers one window, not the best."""
+    t = np.sort(np.asarray(times, dtype=float))
+    if t.size < 2 or t[-1] - t[0] < window:
+        return None
+    starts = t[t <= t[-1] - window]
+    ends = np.searchsorted(t, starts + window, side="right")
+    counts = ends - np.searchsorted(t, starts, side="left")
+    return float((counts.max() - 1) / window)
