@@ -12,6 +12,7 @@ import faulthandler
 import os
 import signal
 import sys
+import time
 
 import rclpy
 from rclpy.exceptions import ParameterException
@@ -23,10 +24,11 @@ from .parameters import ConfigurationError, undeclared_overrides
 from .processes import PARENT_PID_ENV
 
 PR_SET_PDEATHSIG = 1     # <linux/prctl.h>
-# A teardown (executor shutdown, close, destroy_node) still running after this long dumps every
-# thread's traceback to stderr (the node's log), so a hang in the middleware is diagnosable; it is
-# below NodeProcess.stop's 10 s wait for SIGINT, so the dump is written before the escalation.
-TEARDOWN_DUMP_S = 8.0
+# A spin loop that has not come back for this long (a callback blocked in the middleware, or the
+# teardown: executor shutdown, close, destroy_node) dumps every thread's traceback to stderr (the
+# node's log), from faulthandler's own thread, so a hang is diagnosable even inside C. Below
+# NodeProcess.stop's 10 s wait for SIGINT, so the dump is written before the escalation.
+STUCK_DUMP_S = 8.0
 
 
 class _StopRequest:
@@ -159,7 +161,11 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
         spinner = executor() if executor is not None else SingleThreadedExecutor()
         spinner.add_node(node)
         # wake-ups at least every 0.1 s, so a stop request is seen even in a node without timers
+        armed = -1.0
         while stop.signal is None and rclpy.ok():
+            if time.monotonic() - armed >= STUCK_DUMP_S / 8:     # re-armed often: fires only if stuck
+                faulthandler.dump_traceback_later(STUCK_DUMP_S, exit=False)
+                armed = time.monotonic()
             spinner.spin_once(timeout_sec=0.1)
     except (ConfigurationError, ParameterException) as exc:
         name = node.get_logger().name if node is not None else _name(node_class, args)
@@ -171,7 +177,7 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
     finally:
         stop.starting = False
         stop.disarm()
-        faulthandler.dump_traceback_later(TEARDOWN_DUMP_S, exit=False)
+        faulthandler.dump_traceback_later(STUCK_DUMP_S, exit=False)
         try:
             if spinner is not None:
                 spinner.shutdown(timeout_sec=5.0)

@@ -1,7 +1,7 @@
 """run_node's stops: a SIGINT while the node is constructed ends the process, also when the first
 KeyboardInterrupt is raised inside a callback from C (which Python prints and drops, as
-llvmlite's object-cache callback does while numba compiles a node's kernels); a teardown that
-hangs leaves its traceback in the node's log."""
+llvmlite's object-cache callback does while numba compiles a node's kernels); a callback or a
+teardown that hangs leaves its traceback in the node's log."""
 
 import signal
 import subprocess
@@ -59,11 +59,17 @@ HUNG_TEARDOWN = textwrap.dedent("""
     from rclpy.node import Node
     from soft_robot_common import node_main
 
-    node_main.TEARDOWN_DUMP_S = 0.5
+    node_main.STUCK_DUMP_S = 0.5
     class Ready(Node):
         def __init__(self):
             super().__init__("hung_teardown")
-            print("ready", flush=True)
+            self.said = False
+            self.create_timer(0.05, self.tick)
+
+        def tick(self):                  # spinning: the start-up is over
+            if not self.said:
+                print("ready", flush=True)
+                self.said = True
 
     def close_that_hangs(node):
         time.sleep(1.5)
@@ -91,3 +97,47 @@ def test_a_teardown_that_hangs_dumps_its_traceback_and_a_quick_one_does_not():
     assert "close_that_hangs" in err and "Thread" in err, err
     code, err = run(HUNG_TEARDOWN.replace("time.sleep(1.5)", "pass"))
     assert code == 0 and "close_that_hangs" not in err, err
+
+
+STUCK_CALLBACK = textwrap.dedent("""
+    import sys, time
+    from rclpy.node import Node
+    from soft_robot_common import node_main
+
+    node_main.STUCK_DUMP_S = 1.5
+    class Stuck(Node):
+        def __init__(self):
+            super().__init__("stuck_callback")
+            self.n = 0
+            self.create_timer(0.05, self.tick)
+
+        def tick(self):
+            self.n += 1
+            if self.n == 3:
+                print("ready", flush=True)
+            if self.n == 5:
+                callback_that_blocks()
+
+    def callback_that_blocks():
+        time.sleep(4.0)
+
+    sys.exit(node_main.run_node(Stuck))
+""")
+
+
+def test_a_callback_that_blocks_the_spin_loop_dumps_its_traceback():
+    proc = subprocess.Popen([sys.executable, "-c", STUCK_CALLBACK], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout.readline().strip() == "ready"
+        time.sleep(4.5)               # the blocking callback ran and returned
+        proc.send_signal(signal.SIGINT)
+        code = proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    err = proc.stderr.read()
+    assert code == 0, err
+    assert err.count("callback_that_blocks") == 1, err     # dumped once, while it blocked
+    assert err.count("Timeout (") == 1, err                 # and never while the loop was turning
