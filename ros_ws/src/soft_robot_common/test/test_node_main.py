@@ -78,24 +78,27 @@ HUNG_TEARDOWN = textwrap.dedent("""
 """)
 
 
-def test_a_teardown_that_hangs_dumps_its_traceback_and_a_quick_one_does_not():
-    def run(script):
-        proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                text=True)
-        try:
-            assert proc.stdout.readline().strip() == "ready"
-            proc.send_signal(signal.SIGINT)
-            code = proc.wait(timeout=10)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
-        return code, proc.stderr.read()
+def _stop_when_ready(script: str, wait_s: float = 0.0) -> tuple[int, str]:
+    """Run ``script``, SIGINT it ``wait_s`` after it printed "ready"; its exit code and stderr."""
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout.readline().strip() == "ready"
+        time.sleep(wait_s)
+        proc.send_signal(signal.SIGINT)
+        code = proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return code, proc.stderr.read()
 
-    code, err = run(HUNG_TEARDOWN)
+
+def test_a_teardown_that_hangs_dumps_its_traceback_and_a_quick_one_does_not():
+    code, err = _stop_when_ready(HUNG_TEARDOWN)
     assert code == 0, err      # slow, not dead: the stop still completes
     assert "close_that_hangs" in err and "Thread" in err, err
-    code, err = run(HUNG_TEARDOWN.replace("time.sleep(1.5)", "pass"))
+    code, err = _stop_when_ready(HUNG_TEARDOWN.replace("time.sleep(1.5)", "pass"))
     assert code == 0 and "close_that_hangs" not in err, err
 
 
@@ -126,18 +129,7 @@ STUCK_CALLBACK = textwrap.dedent("""
 
 
 def test_a_callback_that_blocks_the_spin_loop_dumps_its_traceback():
-    proc = subprocess.Popen([sys.executable, "-c", STUCK_CALLBACK], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-    try:
-        assert proc.stdout.readline().strip() == "ready"
-        time.sleep(4.5)               # the blocking callback ran and returned
-        proc.send_signal(signal.SIGINT)
-        code = proc.wait(timeout=10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    err = proc.stderr.read()
+    code, err = _stop_when_ready(STUCK_CALLBACK, wait_s=4.5)      # the blocking callback ran and returned
     assert code == 0, err
     assert err.count("callback_that_blocks") == 1, err     # dumped once, while it blocked
     assert err.count("Timeout (") == 1, err                 # and never while the loop was turning
