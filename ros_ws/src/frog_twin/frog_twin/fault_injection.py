@@ -33,13 +33,14 @@ def _stamp(msg) -> float:
 class RunObserver:
     """Subscriptions of the watch node: sim time, odometry, decisions, firings, diagnostics."""
 
-    def __init__(self, node):
+    def __init__(self, node, deaf=None):
         from diagnostic_msgs.msg import DiagnosticArray
         from nav_msgs.msg import Odometry
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
         from soft_robot_interfaces.msg import LimbActivation, PlannerStatus, Primitive
         self.node = node
+        self.deaf = deaf                # a frog_twin.core.liveness.DeafWatch fed from /diagnostics, or None
         self.obs = Observed()
         self.seen = {t: [] for t in CHECKED_TOPICS}
         self.sim_now = None
@@ -94,6 +95,11 @@ class RunObserver:
         for st in msg.status:
             if "serial link" in st.name and "EMERGENCY" in st.message and self.emergency is None:
                 self.emergency = st.message
+            if self.deaf is not None and st.name.startswith(("camera_sim:", "tracker_node:")):
+                frames = next((kv.value for kv in st.values if kv.key == "frames"), None)
+                if frames is not None and frames.isdigit():
+                    feed = self.deaf.camera if st.name.startswith("camera_sim:") else self.deaf.tracker
+                    feed(time.monotonic(), int(frames))
 
     def node_restarted(self, name: str) -> None:
         if self.sim_now is not None:
@@ -145,6 +151,7 @@ class FaultInjector:
         self._clients = {}
         self._futures = []
         self._sim_abs = 0.0         # /clock at the last tick
+        self.held = set()          # nodes SIGSTOPped now (their silence is the fault's)
         for f in faults:
             self._plan(f)
         self.pending.sort(key=lambda a: a[0])
@@ -185,10 +192,15 @@ class FaultInjector:
                      wall_after=(f.duration, f"{f.label()}: clock running",
                                  lambda: self._set("sim_node", paused=False)))
         elif k == "sigstop":
-            self._at(at, f"{f.label()}: SIGSTOP {f.target}",
-                     lambda: self.supervisor.process(f.target).send(signal.SIGSTOP),
-                     wall_after=(f.duration, f"{f.label()}: SIGCONT {f.target}",
-                                 lambda: self.supervisor.process(f.target).send(signal.SIGCONT)))
+            def stop():
+                self.held.add(f.target)
+                self.supervisor.process(f.target).send(signal.SIGSTOP)
+
+            def cont():
+                self.supervisor.process(f.target).send(signal.SIGCONT)
+                self.held.discard(f.target)
+            self._at(at, f"{f.label()}: SIGSTOP {f.target}", stop,
+                     wall_after=(f.duration, f"{f.label()}: SIGCONT {f.target}", cont))
 
     def _at(self, t, what, action, wall_after=None) -> None:
         self.pending.append((t, None, what, action, wall_after))

@@ -69,6 +69,7 @@ from soft_robot_common.supervision import RestartPolicy, Supervisor
 from frog_twin.core import twin_report
 from frog_twin.core.cases import PATH_NAMES, path_start_pose, placed_path_settings
 from frog_twin.core.faults import FaultSpecError, check_against_graph, fault_report, parse_faults
+from frog_twin.core.liveness import DEAF_AFTER_S, DeafWatch
 # the realism defaults of the twin (each switchable; see --help)
 from frog_twin.core.realism import (HARDWARE_PERIOD_S, KICK_STRENGTH_SD, LIMB_STRENGTH_SD, YAW_DISTURBANCE_SD,
                                     YAW_DISTURBANCE_TAU_S)
@@ -308,7 +309,8 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
             graph["robot_emulator"].parameters["unplug_duration_s"] = 0.0
     domain = acquire_domain()
     watch = PlannerWatch(domain)
-    observer = RunObserver(watch.node)
+    deaf = DeafWatch(args.deaf_tracker_after) if args.deaf_tracker_after > 0 else None
+    observer = RunObserver(watch.node, deaf)
     supervisor = Supervisor(RestartPolicy(), essential=ESSENTIAL_NODES, log=lambda s: print("  " + s, flush=True),
                             on_restart=lambda name, proc: observer.node_restarted(name))
     injector = None
@@ -349,6 +351,8 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
             stop_reason = supervisor.poll()
             if stop_reason:
                 break
+            if deaf is not None:
+                _check_tracker_hears(deaf, supervisor, injector)
             observer.watch_recorder("recorder" in supervisor.names() and not supervisor.down("recorder")
                                     and watch.subscribed("recorder", PLANNER_TOPICS))
             if watch.state == watch.Status.STATE_GOAL_REACHED:
@@ -421,6 +425,21 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
     metrics["video"] = str(out.parent / f"{name}.mp4") if frames else None
     (out.parent / f"{name}.json").write_text(json.dumps(metrics, indent=1, default=float) + "\n")
     return rec, metrics
+
+
+def _check_tracker_hears(deaf: DeafWatch, supervisor: Supervisor, injector: FaultInjector) -> None:
+    """Kill a running tracker that receives no frame while the camera publishes (frog_twin.core.liveness);
+    the supervisor restarts it. Its silence is excused while it, or the camera, is down or held."""
+    names = supervisor.names()
+    if "tracker_node" not in names or "camera_sim" not in names:
+        return
+    excused = (supervisor.down("tracker_node") or supervisor.down("camera_sim") or bool(supervisor.recovering())
+               or bool(injector.held & {"tracker_node", "camera_sim"}))
+    silent = deaf.deaf_for(time.monotonic(), excused)
+    if silent is not None:
+        supervisor.kill_hung("tracker_node", f"deaf: no camera frame received for {silent:.1f} s while camera_sim "
+                                             f"published {deaf.published}")
+        deaf.restart(time.monotonic())
 
 
 def _projector(rec):
@@ -666,6 +685,10 @@ def _main(argv=None) -> int:
     ap.add_argument("--node-param", action="append", default=[], metavar="NODE:NAME=VALUE",
                     help="set a node's parameter for this run (YAML value; repeatable), e.g. "
                          "--node-param tracker_node:frozen_frames=5 --node-param planner_node:stale_periods=3")
+    fg.add_argument("--deaf-tracker-after", type=float, default=DEAF_AFTER_S, metavar="S",
+                    help="kill and restart a running tracker_node that has received no camera frame for this long "
+                         "[s wall] while camera_sim published (a live but deaf subscriber, docs/faults.md); "
+                         f"0 = off (default {DEAF_AFTER_S:g})")
     fg.add_argument("--stuck-timeout", type=float, default=20.0,
                     help="stop the run cleanly when the planner has not followed for this long [s simulated], "
                          "counted from the end of a node's restart")
@@ -714,6 +737,8 @@ def _main(argv=None) -> int:
             ap.error("--paper-cost, --tag-offset-deg, --aligned-tag and --ideal-loop go with --replay / --replay-all, "
                      "--seeds "
                      "also with --fault-campaign")
+    if not args.deaf_tracker_after >= 0:
+        ap.error("--deaf-tracker-after must be >= 0 (0 = off)")
     if not args.stuck_timeout > 0:
         ap.error("--stuck-timeout must be > 0")
     try:

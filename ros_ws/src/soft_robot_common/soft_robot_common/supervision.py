@@ -8,7 +8,8 @@ start from the initial pose); their exit, or a node out of restarts, ends the ru
 reason in :attr:`Supervisor.stop_reason`. A node may also have a readiness check (a pattern
 its log must show within ``ready_timeout_s`` of each restart): a restarted process that is
 running but never gets ready (a middleware hang, docs/faults.md) is SIGKILLed and handled as
-a crash. The first start is the caller's to wait for.
+a crash, as is one the caller finds hung by its own check
+(:meth:`Supervisor.kill_hung`). The first start is the caller's to wait for.
 Every exit and restart is an event with its time, printed and kept for the run's report.
 Pure Python (no rclpy).
 """
@@ -182,10 +183,15 @@ class Supervisor:
         if slot.ready.search(slot.process.log_text()):
             slot.ready_seen = True
         elif now - slot.process.started_at > slot.ready_timeout_s:
-            self._event(slot.name, "hung", None, f"no {slot.ready.pattern!r} in its log within "
-                        f"{slot.ready_timeout_s:g} s of its start; SIGKILL")
-            slot.process.send(signal.SIGKILL)
-            slot.process.wait(10)
+            self.kill_hung(slot.name, f"no {slot.ready.pattern!r} in its log within "
+                           f"{slot.ready_timeout_s:g} s of its start")
+
+    def kill_hung(self, name: str, why: str) -> None:
+        """SIGKILL node ``name``, running but not working (``why``); poll() then restarts it like a crash."""
+        slot = self._slots[name]
+        self._event(name, "hung", None, f"{why}; SIGKILL")
+        slot.process.send(signal.SIGKILL)
+        slot.process.wait(10)
 
     def stop_all(self, warn: Callable[[str], None] = print) -> None:
         """Stop every running process in reverse start order; warn for any that did not exit 0."""

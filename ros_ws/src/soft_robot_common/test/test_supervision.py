@@ -157,3 +157,21 @@ def test_a_node_is_recovering_from_its_exit_until_its_restart_is_ready(tmp_path)
         assert sup.recovering() == []
     finally:
         sup.stop_all(warn=lambda s: None)
+
+
+def test_a_running_node_found_hung_by_the_caller_is_killed_and_restarted(tmp_path):
+    sup = Supervisor(RestartPolicy(max_restarts=1, backoff_s=0.1), log=lambda s: None)
+    sup.add("tracker", _sleeper(tmp_path, "tracker"), lambda label: _sleeper(tmp_path, label))
+    first = sup.process("tracker")
+    try:
+        sup.kill_hung("tracker", "deaf for 8.0 s")
+        assert not first.running() and first.proc.returncode == -signal.SIGKILL
+        _poll_until(sup, lambda: any(e.what == "restarted" for e in sup.events))
+        assert [e.what for e in sup.events] == ["hung", "exited", "restarted"]
+        assert sup.events[0].detail == "deaf for 8.0 s; SIGKILL"
+        assert sup.process("tracker").running() and sup.stop_reason is None
+        sup.kill_hung("tracker", "deaf again")          # out of restarts: the run stops, naming it
+        _poll_until(sup, lambda: sup.stop_reason is not None)
+        assert sup.stop_reason.startswith("tracker exited (SIGKILL; 1 restart(s) used)")
+    finally:
+        sup.stop_all(warn=lambda s: None)

@@ -1,0 +1,81 @@
+"""Is a running tracker still hearing its camera? (issue 22: a live process can be deaf.)
+
+A tracker process can be alive and receive nothing: after a SIGSTOP/SIGCONT, or after its
+camera was restarted, Fast DDS sometimes never delivers to it again (docs/faults.md). Its
+process runs, so the supervisor sees no exit. The two nodes' diagnostics (1 Hz on their wall
+clocks) tell it: the camera's count of published frames goes up while the tracker's count of
+received frames does not (or its diagnostics stop arriving: an executor that runs nothing).
+
+:class:`DeafWatch` is fed both counts with their arrival times and says when the tracker has
+heard nothing for ``bound_s`` while the camera published at least ``min_frames``. Times when
+silence is expected (the tracker or camera down or restarting, the tracker SIGSTOPped on
+purpose) are excused: the wait starts again after them. Pure Python (no rclpy).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+#: Tracker silence [s of wall time] with the camera publishing that counts as deaf. Above the
+#: longest SIGSTOP of the campaign (4 s) and the 1 Hz diagnostics' jitter under load.
+DEAF_AFTER_S = 8.0
+#: Frames the camera must have published in that time (not a camera that is itself stalled).
+DEAF_MIN_FRAMES = 10
+
+
+@dataclass
+class DeafWatch:
+    """Tracks the camera's published and the tracker's received frame counts (see the module)."""
+
+    bound_s: float = DEAF_AFTER_S
+    min_frames: int = DEAF_MIN_FRAMES
+    _since: float | None = None          # last time the tracker heard a frame (or the wait restarted)
+    _published: int = 0                  # camera frames published since then
+    _camera_last: int | None = None
+    _tracker_last: int | None = None
+
+    def __post_init__(self):
+        if not (self.bound_s > 0 and self.min_frames >= 1):
+            raise ValueError(f"deaf tracker check: need bound_s > 0 and min_frames >= 1, got {self.bound_s}, "
+                             f"{self.min_frames}")
+
+    def restart(self, now: float) -> None:
+        """Start waiting again from ``now`` (an excuse ended, the tracker was restarted)."""
+        self._since = now
+        self._published = 0
+
+    def camera(self, now: float, frames: int) -> None:
+        """The camera's diagnostics: ``frames`` published so far (a smaller count: a new process)."""
+        last = self._camera_last
+        self._camera_last = frames
+        if self._since is None:
+            self.restart(now)
+            return
+        self._published += frames - last if last is not None and frames >= last else frames
+
+    def tracker(self, now: float, frames: int) -> None:
+        """The tracker's diagnostics: ``frames`` received so far (another count, larger or, from a new
+        process, smaller, means it hears)."""
+        last = self._tracker_last
+        self._tracker_last = frames
+        if self._since is None or frames != last:
+            self.restart(now)
+
+    def deaf_for(self, now: float, excused: bool) -> float | None:
+        """Seconds the tracker has heard nothing while the camera published ``min_frames`` or more,
+        once that is at least ``bound_s``; else None. ``excused``: silence is expected now (the
+        wait starts again after it)."""
+        if excused:
+            self.restart(now)
+            return None
+        if self._since is None:
+            return None
+        silent = now - self._since
+        if silent >= self.bound_s and self._published >= self.min_frames:
+            return silent
+        return None
+
+    @property
+    def published(self) -> int:
+        """Camera frames published since the tracker last heard one."""
+        return self._published

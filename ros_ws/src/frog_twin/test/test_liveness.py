@@ -1,0 +1,68 @@
+"""The deaf-tracker check on hand-made diagnostics sequences (1 Hz, as the nodes publish them)."""
+
+import pytest
+
+from frog_twin.core.liveness import DeafWatch
+
+
+def feed(w, t0, t1, camera_rate, tracker_rate, cam0=0, trk0=0, tracker_reports=True, excused=lambda t: False):
+    """Diagnostics every second from t0 to t1; the first time deaf_for() answered, or None."""
+    for k in range(int(t1 - t0) + 1):
+        t = t0 + k
+        w.camera(t, cam0 + int(camera_rate * (t - t0)))
+        if tracker_reports:
+            w.tracker(t + 0.3, trk0 + int(tracker_rate * (t - t0)))
+        d = w.deaf_for(t + 0.5, excused(t))
+        if d is not None:
+            return t + 0.5, d
+    return None
+
+
+def test_a_tracker_that_hears_is_never_deaf():
+    assert feed(DeafWatch(8.0, 10), 0, 60, 30, 30) is None
+    assert feed(DeafWatch(8.0, 10), 0, 60, 30, 2) is None          # slow (loaded machine) but hearing
+
+
+def test_a_tracker_whose_count_stalls_is_deaf_after_the_bound():
+    w = DeafWatch(8.0, 10)
+    assert feed(w, 0, 10, 30, 30) is None
+    # from t = 11 the camera goes on (30 frames/s) and the tracker's count stays where it was
+    t, d = feed(w, 11, 40, 30, 0, cam0=330, trk0=300)
+    assert d >= 8.0 and t - d == pytest.approx(10.3)     # silent since its last new count (t = 10.3)
+
+
+def test_a_tracker_whose_diagnostics_stop_is_deaf_too():
+    w = DeafWatch(8.0, 10)
+    feed(w, 0, 5, 30, 30)
+    t, d = feed(w, 6, 40, 30, 0, cam0=180, tracker_reports=False)
+    assert t == pytest.approx(13.5) and d == pytest.approx(8.2)
+
+
+def test_a_stalled_camera_makes_no_deaf_tracker():
+    w = DeafWatch(8.0, 10)
+    feed(w, 0, 5, 30, 30)
+    assert feed(w, 6, 40, 0, 0, cam0=150, trk0=150) is None      # clock stall, camera stopped: no frames
+    assert feed(w, 41, 80, 0.2, 0, cam0=150, trk0=150) is None    # fewer than min_frames in the silence
+
+
+def test_excused_silence_does_not_count_and_the_wait_restarts_after_it():
+    w = DeafWatch(8.0, 10)
+    feed(w, 0, 5, 30, 30)
+    # the tracker SIGSTOPped on purpose from 6 to 26 s: excused; deaf 8 s after the excuse ends
+    t, d = feed(w, 6, 60, 30, 0, cam0=180, trk0=150, excused=lambda t: t <= 26)
+    assert t == pytest.approx(34.5) and d == pytest.approx(8.0)
+
+
+def test_a_new_tracker_process_counts_as_hearing():
+    w = DeafWatch(8.0, 10)
+    feed(w, 0, 5, 30, 30)
+    w.camera(6, 200)
+    w.tracker(6.3, 0)             # a restarted tracker reports a smaller count
+    assert w.deaf_for(6.5, False) is None and w.published == 0
+
+
+def test_bad_settings_are_refused():
+    with pytest.raises(ValueError, match="bound_s"):
+        DeafWatch(0.0, 10)
+    with pytest.raises(ValueError, match="min_frames"):
+        DeafWatch(8.0, 0)
