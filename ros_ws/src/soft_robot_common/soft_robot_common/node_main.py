@@ -12,6 +12,7 @@ import faulthandler
 import os
 import signal
 import sys
+import threading
 import time
 
 import rclpy
@@ -29,6 +30,11 @@ PR_SET_PDEATHSIG = 1     # <linux/prctl.h>
 # node's log), from faulthandler's own thread, so a hang is diagnosable even inside C. Below
 # NodeProcess.stop's 10 s wait for SIGINT, so the dump is written before the escalation.
 STUCK_DUMP_S = 8.0
+# destroy_node (a node's own clean-up there, e.g. a worker's 5 s stop, then the middleware's) and
+# rclpy.shutdown may take this long [s]; then the process exits without them, saying where they
+# were. Fast DDS can block for good deleting an image publisher whose reliable subscriber was
+# SIGKILLed (camera_sim, docs/faults.md). close() has run by then; below NodeProcess.stop's 10 s.
+MIDDLEWARE_TEARDOWN_S = 6.0
 
 
 class _StopRequest:
@@ -148,6 +154,7 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     spinner = None
+    code = 0
     try:
         if stop.signal is not None:      # a signal before the handler could raise
             raise KeyboardInterrupt
@@ -170,7 +177,8 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
     except (ConfigurationError, ParameterException) as exc:
         name = node.get_logger().name if node is not None else _name(node_class, args)
         print(f"[{name}] fatal configuration error: {exc}", file=sys.stderr)
-        return 2
+        code = 2
+        return code
     except (KeyboardInterrupt, ExternalShutdownException):
         if node is None:
             print(f"[{_name(node_class, args)}] stopped by signal during start-up", file=sys.stderr)
@@ -181,12 +189,26 @@ def run_node(node_class, args=None, close=None, executor=None) -> int:
         try:
             if spinner is not None:
                 spinner.shutdown(timeout_sec=5.0)
+            if node is not None and close is not None:
+                close(node)
+            give_up = threading.Timer(MIDDLEWARE_TEARDOWN_S, _exit_without_teardown,
+                                      args=(_name(node_class, args), lambda: code))
+            give_up.daemon = True
+            give_up.start()
             if node is not None:
-                if close is not None:
-                    close(node)
                 node.destroy_node()
             if rclpy.ok():
                 rclpy.shutdown()
+            give_up.cancel()
         finally:
             faulthandler.cancel_dump_traceback_later()
-    return 0
+    return code
+
+
+def _exit_without_teardown(name: str, code) -> None:
+    """The middleware's teardown is blocked: say where, and end the process without it."""
+    print(f"[{name}] the middleware's teardown (destroy_node, rclpy.shutdown) is still blocked after "
+          f"{MIDDLEWARE_TEARDOWN_S:g} s; exiting without it. Where it is:", file=sys.stderr, flush=True)
+    faulthandler.dump_traceback(all_threads=True)
+    sys.stdout.flush()
+    os._exit(code())

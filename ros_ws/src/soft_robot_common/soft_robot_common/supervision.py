@@ -25,6 +25,10 @@ from typing import Callable, Optional
 from .processes import NodeProcess
 
 
+#: A stop slower than this [s] is mentioned (a node whose middleware teardown blocked, node_main).
+SLOW_STOP_S = 3.0
+
+
 @dataclass(frozen=True)
 class RestartPolicy:
     """How often and how soon a crashed node is started again."""
@@ -202,6 +206,8 @@ class Supervisor:
                 code = p.stop()
                 if code not in (0, None):
                     warn(f"  warning: {p.name} exited with {code}; log {p.log_path}")
+                elif p.stop_seconds > SLOW_STOP_S:
+                    warn(f"  note: {p.name} took {p.stop_seconds:.1f} s to stop; log {p.log_path}")
 
     def summary(self) -> dict:
         return {"restarts": {s.name: s.restarts for s in self._slots.values()},

@@ -133,3 +133,41 @@ def test_a_callback_that_blocks_the_spin_loop_dumps_its_traceback():
     assert code == 0, err
     assert err.count("callback_that_blocks") == 1, err     # dumped once, while it blocked
     assert err.count("Timeout (") == 1, err                 # and never while the loop was turning
+
+
+BLOCKED_MIDDLEWARE = textwrap.dedent("""
+    import sys, time
+    from rclpy.node import Node
+    from soft_robot_common import node_main
+
+    node_main.MIDDLEWARE_TEARDOWN_S = 1.0
+    class Blocked(Node):
+        def __init__(self):
+            super().__init__("blocked_teardown")
+            self.said = False
+            self.create_timer(0.05, self.tick)
+
+        def tick(self):
+            if not self.said:
+                print("ready", flush=True)
+                self.said = True
+
+        def destroy_node(self):          # as Fast DDS deleting a writer with a dead reliable reader
+            time.sleep(60)
+
+    def close(node):
+        print("closed", file=sys.stderr, flush=True)
+
+    sys.exit(node_main.run_node(Blocked, close=close))
+""")
+
+
+def test_a_blocked_middleware_teardown_ends_the_process_after_its_limit_and_says_where():
+    t0 = time.monotonic()
+    code, err = _stop_when_ready(BLOCKED_MIDDLEWARE)
+    took = time.monotonic() - t0
+    assert code == 0, err
+    assert took < 5.0, took                     # not the 60 s of the blocked call
+    assert "teardown (destroy_node, rclpy.shutdown) is still blocked after 1 s" in err, err
+    assert "in destroy_node" in err, err        # the traceback of where it was blocked
+    assert err.index("closed") < err.index("still blocked"), err    # the node's own close() ran first

@@ -175,3 +175,19 @@ def test_a_running_node_found_hung_by_the_caller_is_killed_and_restarted(tmp_pat
         assert sup.stop_reason.startswith("tracker exited (SIGKILL; 1 restart(s) used)")
     finally:
         sup.stop_all(warn=lambda s: None)
+
+
+def test_a_slow_but_clean_stop_is_mentioned_and_stays_clean(tmp_path):
+    slow = ("import signal, sys, time\n"
+            "def bye(*a):\n    time.sleep(3.5)\n    sys.exit(0)\n"
+            "signal.signal(signal.SIGINT, bye)\nprint('up', flush=True)\ntime.sleep(60)\n")
+    sup = Supervisor(RestartPolicy(), log=lambda s: None)
+    sup.add("cam", NodeProcess([sys.executable, "-c", slow], dict(os.environ), tmp_path / "cam.log", "cam"),
+            lambda label: _sleeper(tmp_path, label))
+    sup.process("cam").wait_for_log("up")
+    said = []
+    sup.stop_all(warn=said.append)
+    assert sup.unclean_stops() == []
+    report = sup.summary()["stops"]["cam"]
+    assert report["signal"] == "SIGINT" and report["code"] == 0 and 3.5 <= report["seconds"] < 10, report
+    assert len(said) == 1 and said[0].startswith("  note: cam took") and "s to stop; log" in said[0], said
