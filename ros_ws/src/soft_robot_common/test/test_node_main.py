@@ -54,22 +54,26 @@ def test_sigint_during_a_start_up_that_swallows_exceptions_still_stops_it():
     assert took < 5.0, f"stopped {took:.1f} s after SIGINT"
 
 
-HUNG_TEARDOWN = textwrap.dedent("""
+READY_NODE = textwrap.dedent("""
     import sys, time
     from rclpy.node import Node
     from soft_robot_common import node_main
 
-    node_main.STUCK_DUMP_S = 0.5
     class Ready(Node):
+        \"\"\"Prints "ready" once it spins (its start-up is over).\"\"\"
         def __init__(self):
-            super().__init__("hung_teardown")
+            super().__init__("ready_node")
             self.said = False
             self.create_timer(0.05, self.tick)
 
-        def tick(self):                  # spinning: the start-up is over
+        def tick(self):
             if not self.said:
                 print("ready", flush=True)
                 self.said = True
+""")
+
+HUNG_TEARDOWN = READY_NODE + textwrap.dedent("""
+    node_main.STUCK_DUMP_S = 0.5
 
     def close_that_hangs(node):
         time.sleep(1.5)
@@ -135,23 +139,9 @@ def test_a_callback_that_blocks_the_spin_loop_dumps_its_traceback():
     assert err.count("Timeout (") == 1, err                 # and never while the loop was turning
 
 
-BLOCKED_MIDDLEWARE = textwrap.dedent("""
-    import sys, time
-    from rclpy.node import Node
-    from soft_robot_common import node_main
-
+BLOCKED_MIDDLEWARE = READY_NODE + textwrap.dedent("""
     node_main.MIDDLEWARE_TEARDOWN_S = 1.0
-    class Blocked(Node):
-        def __init__(self):
-            super().__init__("blocked_teardown")
-            self.said = False
-            self.create_timer(0.05, self.tick)
-
-        def tick(self):
-            if not self.said:
-                print("ready", flush=True)
-                self.said = True
-
+    class Blocked(Ready):
         def destroy_node(self):          # as Fast DDS deleting a writer with a dead reliable reader
             time.sleep(60)
 
