@@ -66,3 +66,11 @@ def test_bad_settings_are_refused():
         DeafWatch(0.0, 10)
     with pytest.raises(ValueError, match="min_frames"):
         DeafWatch(8.0, 0)
+
+
+def test_the_twin_refuses_a_negative_bound(capsys):
+    from frog_twin.twin import _main
+    with pytest.raises(SystemExit) as exc:
+        _main(["--deaf-tracker-after", "-1"])
+    assert exc.value.code == 2
+    assert "--deaf-tracker-after must be >= 0 (0 = off)" in capsys.readouterr().err
