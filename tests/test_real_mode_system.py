@@ -337,11 +337,15 @@ def test_ctrl_c_during_preflight_ends_at_once_without_actuation(video, library, 
     assert time.monotonic() - t_int < 40, "the pre-flight did not end at Ctrl-C"
 
 
-def test_killed_tracker_is_restarted_and_the_run_goes_on(video, library, launch, ros_domain, probe, tmp_path):
-    """Supervision in real mode (issue 22): SIGKILL of tracker_node while following; frog-twin restarts it
-    with back-off (the tag-lost timeout does not count its downtime), poses come back, the planner follows
-    again, and /frog/stop then ends the run with the restart in the report."""
+@pytest.mark.parametrize("sig", ["SIGKILL", "SIGSTOP"])
+def test_killed_tracker_is_restarted_and_the_run_goes_on(sig, video, library, launch, ros_domain, probe, tmp_path):
+    """Supervision in real mode (issue 22): SIGKILL of tracker_node while following, or SIGSTOP (a tracker
+    alive but stuck, as when the middleware blocks it); frog-twin restarts it (a stuck one once no pose has
+    come for the tag-lost timeout while the camera publishes and the tracker never said the tag was lost;
+    the timeout does not count the downtime), poses come back, the planner follows again, and /frog/stop
+    then ends the run with the restart in the report."""
     import signal
+    import warnings
     from geometry_msgs.msg import PoseStamped
     from soft_robot_interfaces.msg import PlannerStatus
     from std_msgs.msg import Empty
@@ -363,7 +367,7 @@ def test_killed_tracker_is_restarted_and_the_run_goes_on(video, library, launch,
             assert proc.poll() is None, log.read_text()[-3000:]
             tracker = _node_pid("tracker_node", ros_domain.domain_id)
             assert tracker is not None
-            os.kill(tracker, signal.SIGKILL)
+            os.kill(tracker, getattr(signal, sig))
             t_kill = time.monotonic()
             probe.spin_until(lambda: "supervisor: tracker_node restarted" in log.read_text()
                              or proc.poll() is not None, 60, "the tracker's restart")
@@ -373,7 +377,7 @@ def test_killed_tracker_is_restarted_and_the_run_goes_on(video, library, launch,
             probe.spin_until(lambda: len([t for t in poses if t > t_kill]) >= 5 or proc.poll() is not None,
                              90, "poses from the restarted tracker")
             t_back = min(t for t in poses if t > t_kill)
-            probe.spin_until(lambda: any(t > t_back for t in following) or proc.poll() is not None, 30,
+            probe.spin_until(lambda: any(t > t_back for t in following) or proc.poll() is not None, 60,
                              "the planner following again")
             assert proc.poll() is None, log.read_text()[-3000:]
             probe.spin_until(lambda: pub.get_subscription_count() >= 3, 30, "/frog/stop matched")
@@ -386,10 +390,20 @@ def test_killed_tracker_is_restarted_and_the_run_goes_on(video, library, launch,
                 proc.kill()
     text = log.read_text()
     assert proc.returncode == 0, text[-3000:]
-    assert "supervisor: tracker_node exited (SIGKILL): restart 1 in 1.0 s" in text, text[-3000:]
     assert "stopped (stop received on /frog/stop)" in text, text[-2000:]
     (m,) = json.loads((out / "metrics.json").read_text())
     assert m["stop_reason"] == "stop received on /frog/stop"
-    assert m["supervision"]["restarts"]["tracker_node"] == 1
-    assert sum(m["supervision"]["restarts"].values()) == 1, m["supervision"]
+    hung = [e for e in m["supervision"]["events"] if e["what"] == "hung"]
+    assert {e["node"] for e in hung} <= {"tracker_node"}, m["supervision"]["events"]
+    if sig == "SIGKILL":
+        assert "supervisor: tracker_node exited (SIGKILL): restart 1 in 1.0 s" in text, text[-3000:]
+    else:   # the stopped tracker itself was found stuck and killed
+        assert hung and "stuck: no pose for" in hung[0]["detail"], m["supervision"]["events"]
+    # a restarted tracker the middleware blocks after its restart (docs/faults.md) is found stuck and
+    # restarted again: one more restart each
+    if len(hung) > (sig == "SIGSTOP"):
+        warnings.warn(f"a restarted tracker was stuck and restarted again ({len(hung)} hung events, docs/faults.md)")
+    restarts = m["supervision"]["restarts"]
+    assert restarts["tracker_node"] == 1 + len(hung) - (sig == "SIGSTOP"), m["supervision"]
+    assert sum(restarts.values()) == restarts["tracker_node"], m["supervision"]
     assert (out / "line" / "tracker_node.1.log").exists()

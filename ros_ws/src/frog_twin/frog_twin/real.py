@@ -12,15 +12,17 @@ because the stop has several receivers that must all act at once (the planner st
 deciding, the bridge cancels its scheduled pulses and refuses new ones until
 ``~/clear_emergency``) and a sender must not wait for any of them to answer; any tool can
 send it (``ros2 topic pub --once /frog/stop std_msgs/msg/Empty``). ``frog-twin`` itself
-sends it on Ctrl-C, when the tag has been lost for longer than ``--tag-lost-timeout``,
-when a node of the loop is out of restarts (a crashed node is restarted with back-off, as in
-the twin), at the goal and at ``--duration``; then it writes the same
+sends it on Ctrl-C, when the tag has been lost for longer than ``--tag-lost-timeout``
+(unless the tracker is stuck rather than blind: then it is restarted, see
+:func:`frog_twin.core.liveness.tracker_stuck`), when a node of the loop is out of restarts
+(a crashed node is restarted with back-off, as in the twin), at the goal and at ``--duration``; then it writes the same
 report as the twin (trajectory PNG, MP4 with the overlay, JSON, MCAP), measured on the
 tracked pose since there is no ground truth.
 """
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 import time
@@ -33,6 +35,7 @@ from soft_robot_common.graph import load_graph
 from soft_robot_common.tool_signals import redirect_stop_signals
 
 from frog_twin.core import twin_report
+from frog_twin.core.liveness import tracker_stuck
 from frog_twin.core.metrics import best_window_rate
 from frog_twin.core.twin_recording import read_twin_recording
 from frog_common.se2 import yaw_of
@@ -116,6 +119,7 @@ class RealWatch:
         self.imu = 0
         self.link_state = None
         self.link_message = None
+        self.tracker_says = None  # the tracker's last diagnostics message ("tracking", "tag lost: ...")
         self.stops = 0
         self.interrupted = []     # Ctrl-C, SIGTERM, SIGHUP (the stop-signal handler of run_real)
         # camera_node publishes one camera_info per frame (with its size): the rate without the pixels
@@ -145,6 +149,12 @@ class RealWatch:
                 values = {kv.key: kv.value for kv in s.values}
                 self.link_state = values.get("state")
                 self.link_message = s.message
+            elif s.name.startswith("tracker_node:"):
+                self.tracker_says = s.message
+
+    def frames_since(self, t: float) -> int:
+        """Camera frames (camera_info messages) that arrived after monotonic time ``t``."""
+        return len(self.frames) - bisect.bisect_right(self.frames, t, key=lambda f: f[0])
 
     def _on_stop(self, msg) -> None:
         self.stops += 1
@@ -368,6 +378,13 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
                 reason = "goal reached"
             elif now - t_start > args.duration:
                 reason = f"duration {args.duration:g} s"
+            elif lost and restarting is None and "tracker_node" in supervisor.names() and tracker_stuck(
+                    watch.frames_since(last_pose), watch.tracker_says):
+                # the tracker, not the tag: it never said the tag was lost (liveness.tracker_stuck)
+                supervisor.kill_hung("tracker_node", f"stuck: no pose for {now - last_pose:.1f} s while the camera "
+                                                     f"published {watch.frames_since(last_pose)} frames, and its "
+                                                     f"last word was {watch.tracker_says!r}")
+                restarting = now
             elif lost:
                 reason = (f"tag lost for more than {args.tag_lost_timeout:g} s" if restarting is None else
                           f"no pose within {VISION_RESTART_GRACE_S:g} s of a vision node's restart")

@@ -2,7 +2,7 @@
 
 import pytest
 
-from frog_twin.core.liveness import DeafWatch
+from frog_twin.core.liveness import DeafWatch, tracker_stuck
 
 
 def feed(w, t0, t1, camera_rate, tracker_rate, cam0=0, trk0=0, tracker_reports=True, excused=lambda t: False):
@@ -59,6 +59,19 @@ def test_a_new_tracker_process_counts_as_hearing():
     w.camera(6, 200)
     w.tracker(6.3, 0)             # a restarted tracker reports a smaller count
     assert w.deaf_for(6.5, False) is None and w.published == 0
+
+
+@pytest.mark.parametrize("says, frames, stuck", [
+    ("tracking", 30, True),                                   # it never said the tag was lost
+    ("tag not seen: coasting on the prediction", 30, True),   # coasting ends in tracking or "tag lost" within 0.5 s
+    (None, 30, True),                                         # it never said anything
+    ("tag lost: odometry stopped", 30, False),                # a working tracker that lost the tag
+    ("camera frozen: 3 identical frames in a row; odometry stopped", 30, False),
+    ("searching", 30, False),                                 # restarted, never found the tag
+    ("tracking", 9, False),                                   # the camera itself (nearly) stopped
+])
+def test_a_real_tracker_is_stuck_only_if_it_never_said_the_tag_was_lost(says, frames, stuck):
+    assert tracker_stuck(frames, says, min_frames=10) is stuck
 
 
 def test_bad_settings_are_refused():

@@ -79,3 +79,22 @@ class DeafWatch:
     def published(self) -> int:
         """Camera frames published since the tracker last heard one."""
         return self._published
+
+
+#: What ``tracker_node``'s diagnostics say while it publishes poses: tracking, or coasting on its
+#: prediction (which ends within its ``coast_timeout`` in tracking again or in "tag lost").
+STILL_TRACKING = ("tracking", "tag not seen: coasting on the prediction")
+
+
+def tracker_stuck(camera_frames: int, tracker_says: str | None, min_frames: int = DEAF_MIN_FRAMES) -> bool:
+    """On the real robot, when no pose has come for the tag-lost bound: is the silence the tracker's?
+
+    A working tracker that stops seeing the tag says so at once in its diagnostics (a state
+    change is published without waiting for the 1 Hz tick: lost, frozen, searching). A tracker
+    that hears nothing, or whose executor is blocked inside the middleware (seen once after its
+    restart: the main thread in rclpy's ``take`` for more than 8 s, docs/faults.md), says nothing
+    more, and its last word is still one of :data:`STILL_TRACKING`. So it is stuck when the camera
+    published ``camera_frames`` >= ``min_frames`` since the last pose and the tracker's last word
+    is one of those, or there is none (``tracker_says`` None).
+    """
+    return camera_frames >= min_frames and (tracker_says is None or tracker_says in STILL_TRACKING)
