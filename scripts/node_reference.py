@@ -160,9 +160,11 @@ def query(probe, fq: str, tmp: str) -> dict:
                "default": _default(code_default(name, n) if n in overridden else _value(v), tmp),
                "range": _range(d), "live": not d.read_only, "description": d.description}
               for n, d, v in zip(names, descriptors, values)]
-    # graph entries settle after discovery: ask until two answers a second apart agree
-    previous = None
-    for _ in range(30):
+    # graph entries settle after discovery, endpoint by endpoint and late under load: ask until
+    # three answers a second apart agree and name some endpoint (every node here has one), for
+    # at most 60 s
+    previous, same = None, 0
+    for _ in range(60):
         hidden = re.compile(r"/_action/|/(describe|get|list|set)_parameters(_atomically)?$|"
                             r"/get_parameter_types$|/get_type_description$")
         current = {
@@ -176,7 +178,8 @@ def query(probe, fq: str, tmp: str) -> dict:
                         if not hidden.search(e[0])],
             "actions": _ends(get_action_server_names_and_types_by_node(node, name, "/"), tmp),
         }
-        if current == previous:
+        same = same + 1 if current == previous else 0
+        if same >= 2 and any(current.values()):
             break
         previous = current
         rclpy.spin_once(node, timeout_sec=1.0)
