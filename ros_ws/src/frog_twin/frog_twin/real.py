@@ -378,12 +378,16 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
                 reason = "goal reached"
             elif now - t_start > args.duration:
                 reason = f"duration {args.duration:g} s"
-            elif lost and restarting is None and "tracker_node" in supervisor.names() and tracker_stuck(
-                    watch.frames_since(last_pose), watch.tracker_says):
-                # the tracker, not the tag: it never said the tag was lost (liveness.tracker_stuck)
-                supervisor.kill_hung("tracker_node", f"stuck: no pose for {now - last_pose:.1f} s while the camera "
-                                                     f"published {watch.frames_since(last_pose)} frames, and its "
-                                                     f"last word was {watch.tracker_says!r}")
+            elif lost and "tracker_node" in supervisor.names() and not supervisor.down("tracker_node") \
+                    and tracker_stuck(watch.frames_since(last_pose), watch.tracker_says):
+                # the tracker, not the tag: it never said the tag was lost (liveness.tracker_stuck); a
+                # restarted one can wedge too after its first frames (docs/faults.md): killed again,
+                # until the supervisor is out of restarts
+                since = (f"within {VISION_RESTART_GRACE_S:g} s of a restart" if restarting is not None
+                         else f"for {now - last_pose:.1f} s")
+                supervisor.kill_hung("tracker_node", f"stuck: no pose {since} while the camera published "
+                                                     f"{watch.frames_since(last_pose)} frames, and its last word "
+                                                     f"was {watch.tracker_says!r}")
                 restarting = now
             elif lost:
                 reason = (f"tag lost for more than {args.tag_lost_timeout:g} s" if restarting is None else
