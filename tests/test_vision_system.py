@@ -175,12 +175,14 @@ def test_tracker_bad_input_and_lost_tag(launch, probe):
     empty = TankRenderer(model, CameraPose.overhead(0.8), RenderSettings(noise_sigma=2.0))
     # robot far outside the view; each frame rendered anew (its own noise: identical ones are a frozen camera)
     blanks = [empty.render(np.array([5.0, 5.0, 0.0])) for _ in range(30)]
-    n_before = len(est)
+    n_before, n_diags = len(est), len(diags)
     _publish_frames(probe, pub_img, pub_info, blanks, model, 2.0 + 45 / 30)
     probe.spin_for(1.2)
     late = [m for m in est[n_before:] if _t(m.header.stamp) > 2.0 + 44 / 30 + 0.3 + 1e-3]
     assert not late, "stale odometry was published after the coast timeout"
-    assert any("lost" in s.message for d in diags[-3:] for s in d.status)
+    # the state change is published at once, then repeated at 1 Hz: on a loaded machine it can come late
+    probe.spin_until(lambda: any("lost" in s.message for d in diags[n_diags:] for s in d.status), 15,
+                     "diagnostics saying the tag is lost")
     assert trk.stop() == 0
 
 
