@@ -136,3 +136,21 @@ def test_best_window_rate_counts_frames_in_the_best_whole_window():
     assert first_window / 2.0 < 0.8 * 15                      # what a first-window check would have seen
     assert best_window_rate(np.arange(0, 6.0, 1 / 10), 2.0) == pytest.approx(10.0)   # a 10 Hz camera stays 10
     assert best_window_rate(np.random.default_rng(1).permutation(steady), 2.0) == pytest.approx(15.0)
+
+
+def test_a_run_stopped_after_one_pose_still_has_a_report():
+    """Real mode stopped 0.5 s after the start (one tracked pose while following, as when a restarted
+    tracker never delivered): the report uses the last two poses, 3 cm and 4 cm beside the line, instead
+    of failing with 'need >= 2 samples'."""
+    from frog_twin.core.twin_recording import TwinRecording
+    from frog_twin.core.twin_report import run_metrics
+    rec = TwinRecording()
+    rec.path = np.c_[np.linspace(0, 0.6, 50), np.zeros(50)]
+    rec.truth = np.array([[0.0, 0.10, 0.03, 0.0], [1.0, 0.11, 0.04, 0.0]])
+    rec.tracked = rec.truth.copy()
+    rec.status = np.zeros((1, 10))
+    rec.status[0, 0], rec.status[0, 8] = 0.5, 1      # FOLLOWING from t = 0.5 s
+    m = run_metrics(rec, "line")
+    assert m["mean_distance_m"] == pytest.approx(0.035, abs=1e-9)
+    assert m["max_distance_m"] == pytest.approx(0.04, abs=1e-9)
+    assert m["start_time_s"] == 0.5

@@ -33,6 +33,8 @@ def run_metrics(rec: TwinRecording, path_name: str) -> dict:
     following = rec.status[rec.status[:, 8] == 1] if len(rec.status) else rec.status
     start = float(following[0, 0]) if len(following) else float(rec.truth[0, 0])
     truth = rec.truth[rec.truth[:, 0] >= start - 1e-9]
+    if len(truth) < 2:      # a run stopped at once (real mode: one pose after the start): its last two poses
+        truth = rec.truth[-2:]
     prims = [n for t, n in rec.primitives if t >= start - 1e-9 and (goal_time is None or t < goal_time - 1e-9)]
     m = tracking_metrics(truth[:, 0], truth[:, 1:3], rec.path, goal_time=goal_time, primitives=prims)
     m["path"] = path_name
