@@ -120,6 +120,7 @@ class RealWatch:
         self.link_state = None
         self.link_message = None
         self.tracker_says = None  # the tracker's last diagnostics message ("tracking", "tag lost: ...")
+        self.tracker_said_at = None   # its monotonic arrival
         self.stops = 0
         self.interrupted = []     # Ctrl-C, SIGTERM, SIGHUP (the stop-signal handler of run_real)
         # camera_node publishes one camera_info per frame (with its size): the rate without the pixels
@@ -150,7 +151,7 @@ class RealWatch:
                 self.link_state = values.get("state")
                 self.link_message = s.message
             elif s.name.startswith("tracker_node:"):
-                self.tracker_says = s.message
+                self.tracker_says, self.tracker_said_at = s.message, time.monotonic()
 
     def frames_since(self, t: float) -> int:
         """Camera frames (camera_info messages) that arrived after monotonic time ``t``."""
@@ -379,15 +380,19 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
             elif now - t_start > args.duration:
                 reason = f"duration {args.duration:g} s"
             elif lost and "tracker_node" in supervisor.names() and not supervisor.down("tracker_node") \
-                    and tracker_stuck(watch.frames_since(last_pose), watch.tracker_says):
+                    and tracker_stuck(watch.frames_since(last_pose), watch.tracker_says, said_at=watch.tracker_said_at,
+                                      last_pose_at=watch.poses[-1][0] if watch.poses else None):
                 # the tracker, not the tag: it never said the tag was lost (liveness.tracker_stuck); a
                 # restarted one can wedge too after its first frames (docs/faults.md): killed again,
                 # until the supervisor is out of restarts
                 since = (f"within {VISION_RESTART_GRACE_S:g} s of a restart" if restarting is not None
                          else f"for {now - last_pose:.1f} s")
+                word = repr(watch.tracker_says)
+                if watch.poses and watch.tracker_said_at is not None and watch.poses[-1][0] > watch.tracker_said_at:
+                    word = f"a pose (after {word})"
                 supervisor.kill_hung("tracker_node", f"stuck: no pose {since} while the camera published "
                                                      f"{watch.frames_since(last_pose)} frames, and its last word "
-                                                     f"was {watch.tracker_says!r}")
+                                                     f"was {word}")
                 restarting = now
             elif lost:
                 reason = (f"tag lost for more than {args.tag_lost_timeout:g} s" if restarting is None else

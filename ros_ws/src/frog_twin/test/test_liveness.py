@@ -74,6 +74,15 @@ def test_a_real_tracker_is_stuck_only_if_it_never_said_the_tag_was_lost(says, fr
     assert tracker_stuck(frames, says, min_frames=10) is stuck
 
 
+@pytest.mark.parametrize("says, said_at, stuck", [
+    ("searching", 10.0, True),                     # restarted, then a pose: it was tracking when it stopped
+    ("tag lost: odometry stopped", 12.5, False),   # it lost the tag after that pose and said so
+    ("searching", None, False),                    # no time known: the word stands
+])
+def test_a_pose_after_the_last_word_says_tracking(says, said_at, stuck):
+    assert tracker_stuck(30, says, min_frames=10, said_at=said_at, last_pose_at=12.0) is stuck
+
+
 def test_bad_settings_are_refused():
     with pytest.raises(ValueError, match="bound_s"):
         DeafWatch(0.0, 10)

@@ -86,7 +86,8 @@ class DeafWatch:
 STILL_TRACKING = ("tracking", "tag not seen: coasting on the prediction")
 
 
-def tracker_stuck(camera_frames: int, tracker_says: str | None, min_frames: int = DEAF_MIN_FRAMES) -> bool:
+def tracker_stuck(camera_frames: int, tracker_says: str | None, min_frames: int = DEAF_MIN_FRAMES,
+                  said_at: float | None = None, last_pose_at: float | None = None) -> bool:
     """On the real robot, when no pose has come for the tag-lost bound: is the silence the tracker's?
 
     A working tracker that stops seeing the tag says so at once in its diagnostics (a state
@@ -96,5 +97,12 @@ def tracker_stuck(camera_frames: int, tracker_says: str | None, min_frames: int 
     more, and its last word is still one of :data:`STILL_TRACKING`. So it is stuck when the camera
     published ``camera_frames`` >= ``min_frames`` since the last pose and the tracker's last word
     is one of those, or there is none (``tracker_says`` None).
+
+    A pose is a word too: one that arrived (``last_pose_at``) after the last diagnostics message
+    (``said_at``, same clock) says the tracker was tracking. A restarted tracker says "searching"
+    until its first detection, and one stopped between its first pose and the "tracking" it
+    publishes next has only the pose to show for it (seen under load, docs/faults.md).
     """
+    if said_at is not None and last_pose_at is not None and last_pose_at > said_at:
+        tracker_says = STILL_TRACKING[0]
     return camera_frames >= min_frames and (tracker_says is None or tracker_says in STILL_TRACKING)
