@@ -15,6 +15,18 @@ battery and the water). The residual's noise (``noise``) is what the model canno
 from one period to the next: the kick-to-kick spread and the tank's yaw torque (``frog-sim
 disturbance``: 4.3 deg of heading per period on the authors' runs) and the tracker's noise.
 
+With ``torque_sd`` > 0 the filter also estimates the tank's yaw torque (beyond the paper;
+:mod:`~frog_sim.core.yaw_disturbance`): an Ornstein-Uhlenbeck process of stationary sd
+``torque_sd`` and time constant ``Rollouts.yaw_torque_tau``, so its value now says something
+about the next period (the robot's heading residuals correlate 0.63 from one period to the
+next). The state gains the torque at the last observation, ``N0``. For an update the state is
+augmented with the torque now, ``N1 = a N0 + w`` (``a = exp(-dt / tau)``, ``var w = sd^2 (1 -
+a^2)``); the window is rolled out with the torque on the OU bridge's mean from ``N0`` to ``N1``
+(``Rollouts.run_firings``), with one more rollout per torque for the Jacobian; after the
+update ``N0`` is marginalised out, so the state holds the torque now with all the window says
+about it (carrying ``N0`` over by ``a`` would lose what the window's end shows). The
+decision's rollouts start with it (``RolloutStart.yaw_torque``), decaying with ``tau``.
+
 A planner uses :meth:`LimbIdentification.start` instead of ``Rollouts.estimated_start``:
 it learns from the motion since its previous call, sets the rollouts' limb strengths to the
 estimate and returns this decision's start.
@@ -39,6 +51,10 @@ STEP = 0.05
 RELAXING_S = 1.5
 #: Strengths are kept within these factors of nominal.
 BOUNDS = (0.3, 3.0)
+#: The yaw torque is kept within this many stationary sd of 0.
+TORQUE_BOUND_SD = 4.0
+_N_LIMBS = len(LIMB_NAMES)
+_TORQUE = _N_LIMBS       # the torque's index in the state
 
 
 @dataclass
@@ -64,26 +80,37 @@ class LimbIdentification:
         Residual sd of dx, dy [m], dyaw [rad], u, v [m/s], w [rad/s].
     max_gap : float
         Observations further apart than this [s] are not compared (a missed decision).
+    torque_sd : float
+        Stationary sd of the tank's yaw torque [N m] (e.g.
+        :data:`~frog_sim.core.yaw_disturbance.TANK_YAW_TORQUE_SD`); 0: not estimated (none).
     """
 
     def __init__(self, rollouts, prior_sd: float = 0.1, drift_sd: float = 0.005, noise=NOISE,
-                 max_gap: float = 2.5):
+                 max_gap: float = 2.5, torque_sd: float = 0.0):
         noise = np.asarray(noise, dtype=float)
         if noise.shape != (6,) or not np.all(np.isfinite(noise) & (noise > 0)):
             raise ValueError(f"noise {noise.tolist()} must be 6 positive numbers (dx, dy, dyaw, u, v, w)")
-        for name, value in (("prior_sd", prior_sd), ("drift_sd", drift_sd), ("max_gap", max_gap)):
+        for name, value in (("prior_sd", prior_sd), ("drift_sd", drift_sd), ("max_gap", max_gap),
+                            ("torque_sd", torque_sd)):
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} = {value!r} must be a finite number >= 0")
         self.rollouts = rollouts
-        self._config = (prior_sd, drift_sd, noise, max_gap)
-        self.log_strength = np.zeros(len(LIMB_NAMES))
-        self.cov = np.eye(len(LIMB_NAMES)) * prior_sd ** 2
+        self._config = (prior_sd, drift_sd, noise, max_gap, torque_sd)
+        # the state: the limbs' log-strengths, then the yaw torque [N m] at the last observation
+        self.state = np.zeros(_N_LIMBS + 1)
+        self.cov = np.diag([prior_sd ** 2] * _N_LIMBS + [torque_sd ** 2])
+        self.torque_sd = float(torque_sd)
         self.drift_var = drift_sd ** 2
         self.noise_var = noise ** 2
         self.max_gap = float(max_gap)
         self.updates = 0
         self.last_residual = None      # observed - predicted of the last update (6,)
         self._previous = None
+
+    @property
+    def log_strength(self) -> np.ndarray:
+        """The limbs' estimated log-strengths (FL, FR, BL, BR)."""
+        return self.state[:_N_LIMBS]
 
     @property
     def strengths(self) -> dict:
@@ -94,6 +121,16 @@ class LimbIdentification:
     def sd(self) -> dict:
         """Limb name -> sd of the estimate's log-strength (about the relative sd of the strength)."""
         return {limb: float(math.sqrt(v)) for limb, v in zip(LIMB_NAMES, np.diag(self.cov))}
+
+    @property
+    def torque(self) -> float:
+        """The estimated yaw torque at the last observation [N m] (0 when not estimated)."""
+        return float(self.state[_TORQUE])
+
+    @property
+    def torque_estimate_sd(self) -> float:
+        """Its sd [N m]."""
+        return float(math.sqrt(self.cov[_TORQUE, _TORQUE]))
 
     def reset(self) -> None:
         """Forget what was learned and the previous observation (a new robot)."""
@@ -119,17 +156,36 @@ class LimbIdentification:
         obs = _Observation(float(now), np.asarray(pose, dtype=float), np.asarray(twist, dtype=float),
                            {k: float(v) for k, v in dict(last_fired or {}).items()})
         prev, self._previous = self._previous, obs
-        if prev is not None and 0.0 < obs.now - prev.now <= self.max_gap:
-            self._update(prev, obs)
+        if prev is not None and obs.now > prev.now:
+            if not (obs.now - prev.now <= self.max_gap and self._update(prev, obs)):
+                self._carry_torque(obs.now - prev.now)
         self.rollouts.set_limb_strength(self.strengths)
-        return self.rollouts.estimated_start(obs.pose, obs.twist, obs.fired, now=obs.now)
+        return self.rollouts.estimated_start(obs.pose, obs.twist, obs.fired, now=obs.now, yaw_torque=self.torque)
 
     # ------------------------------------------------------------------ the filter
-    def _predict(self, log_strength, prev: _Observation, window: dict, duration: float):
-        """dx, dy, dyaw (previous pose's frame), u, v, w after ``duration`` with these strengths."""
-        self.rollouts.set_limb_strength(dict(zip(LIMB_NAMES, np.exp(log_strength).tolist())))
-        start = self.rollouts.estimated_start(prev.pose, prev.twist, prev.fired, now=prev.now)
-        end = self.rollouts.run_firings(start, window, duration)
+    def _carry_torque(self, dt: float) -> None:
+        """The torque from the last observation to ``dt`` [s] later, learning nothing: its OU mean
+        and variance."""
+        state, cov = self._augmented(dt)
+        keep = [*range(_N_LIMBS), _TORQUE + 1]
+        self.state, self.cov = state[keep], cov[np.ix_(keep, keep)]
+
+    def _augmented(self, dt: float):
+        """State and covariance with the torque ``dt`` [s] after the last observation appended."""
+        a = math.exp(-dt / self.rollouts.yaw_torque_tau)
+        n = self.state.size
+        lift = np.vstack([np.eye(n), np.eye(n)[_TORQUE] * a])
+        cov = lift @ self.cov @ lift.T
+        cov[n, n] += self.torque_sd ** 2 * (1.0 - a * a)
+        return lift @ self.state, cov
+
+    def _predict(self, state, prev: _Observation, window: dict, duration: float):
+        """dx, dy, dyaw (previous pose's frame), u, v, w after ``duration`` with these strengths
+        and the torque from ``state[_TORQUE]`` at ``prev`` to ``state[_TORQUE + 1]`` at the end."""
+        self.rollouts.set_limb_strength(dict(zip(LIMB_NAMES, np.exp(state[:_N_LIMBS]).tolist())))
+        start = self.rollouts.estimated_start(prev.pose, prev.twist, prev.fired, now=prev.now,
+                                              yaw_torque=float(state[_TORQUE]))
+        end = self.rollouts.run_firings(start, window, duration, yaw_torque_end=float(state[_TORQUE + 1]))
         if end is None:
             return None
         return self._relative(prev.pose, end.pose, end.twist)
@@ -140,35 +196,49 @@ class LimbIdentification:
         dx, dy = pose[0] - origin[0], pose[1] - origin[1]
         return np.array([c * dx + s * dy, -s * dx + c * dy, wrap_angle(pose[2] - origin[2]), *twist])
 
-    def _update(self, prev: _Observation, obs: _Observation) -> None:
+    def _update(self, prev: _Observation, obs: _Observation) -> bool:
+        """Learn from the motion between two observations; False if nothing was learned."""
         duration = obs.now - prev.now
         # what fired after the previous observation: newer than it knew, not before it (a firing
         # at the observation's own instant, after it was taken, belongs to the window)
         window = {limb: max(t - prev.now, 0.0) for limb, t in obs.fired.items()
                   if prev.now - 1e-9 <= t <= obs.now and t > prev.fired.get(limb, -math.inf) + 1e-9}
-        involved = sorted({LIMB_IDS[limb] for limb in window}
-                          | {LIMB_IDS[limb] for limb, t in prev.fired.items() if prev.now - t < RELAXING_S})
-        if not involved:
-            return                                  # nothing fired or relaxing: the strengths do not show
-        base = self._predict(self.log_strength, prev, window, duration)
+        # columns: the limbs fired in the window or still relaxing (the others do not show), and
+        # the torque if it is estimated (it turns the robot whether a limb moved or not)
+        columns = sorted({LIMB_IDS[limb] for limb in window}
+                         | {LIMB_IDS[limb] for limb, t in prev.fired.items() if prev.now - t < RELAXING_S})
+        if self.torque_sd > 0.0:
+            columns += [_TORQUE, _TORQUE + 1]       # the torque then and now
+        if not columns:
+            return False                            # nothing fired or relaxing: the strengths do not show
+        state, cov = self._augmented(duration)
+        base = self._predict(state, prev, window, duration)
         if base is None:
-            return
-        jac = np.zeros((6, len(LIMB_NAMES)))
-        for lid in involved:
-            shifted = self.log_strength.copy()
-            shifted[lid] += STEP
+            return False
+        jac = np.zeros((6, state.size))
+        for col in columns:
+            step = STEP if col < _N_LIMBS else self.torque_sd
+            shifted = state.copy()
+            shifted[col] += step
             moved = self._predict(shifted, prev, window, duration)
             if moved is None:
-                return
-            jac[:, lid] = (moved - base) / STEP
+                return False
+            jac[:, col] = (moved - base) / step
         residual = self._relative(prev.pose, obs.pose, obs.twist) - base
         residual[2] = wrap_angle(residual[2])
-        cov = self.cov + np.eye(len(LIMB_NAMES)) * self.drift_var
+        cov += np.diag([self.drift_var] * _N_LIMBS + [0.0, 0.0])
         innovation = jac @ cov @ jac.T + np.diag(self.noise_var)
         gain = cov @ jac.T @ np.linalg.inv(innovation)
+        state = state + gain @ residual
+        cov = (np.eye(state.size) - gain @ jac) @ cov
+        keep = [*range(_N_LIMBS), _TORQUE + 1]     # the torque then is marginalised out
+        state, cov = state[keep], cov[np.ix_(keep, keep)]
         lo, hi = np.log(BOUNDS)
-        self.log_strength = np.clip(self.log_strength + gain @ residual, lo, hi)
-        self.cov = (np.eye(len(LIMB_NAMES)) - gain @ jac) @ cov
-        self.cov = 0.5 * (self.cov + self.cov.T)
+        state[:_N_LIMBS] = np.clip(state[:_N_LIMBS], lo, hi)
+        bound = TORQUE_BOUND_SD * self.torque_sd
+        state[_TORQUE] = np.clip(state[_TORQUE], -bound, bound)
+        self.state = state
+        self.cov = 0.5 * (cov + cov.T)
         self.updates += 1
         self.last_residual = residual
+        return True

@@ -55,7 +55,8 @@ from .integrator import STATUS_OK, run_direct
 from .model_parameters import FrogParameters
 from .rigid_body import center_of_mass, heading_angle, nodal_velocities, yaw_rate
 from frog_common.primitives import LIMB_IDS, LIMB_NAMES, PRIMITIVE_NAMES, primitive_limbs, primitive_name
-from .simulation import DEFAULT_TIME_STEP, FrogSimulation
+from .simulation import DEFAULT_TIME_STEP, DISTURBANCE_INTERVAL_S, FrogSimulation
+from .yaw_disturbance import TANK_YAW_TORQUE_TAU_S, torque_forces, torque_forces_into
 from frog_common.se2 import wrap_angle
 
 __all__ = ['Rollouts', 'RolloutStart', 'RolloutResult', 'tree_rows']
@@ -93,6 +94,9 @@ class RolloutStart:
         Centre of mass x, y [m] and heading [rad] (eq. 10-11) of this state.
     twist : ndarray, shape (3,), optional
         Body twist u, v [m/s], w [rad/s] (eq. 10-12; set on period ends).
+    yaw_torque : float
+        Expected yaw torque about the COM at t = 0 [N m] (the tank's disturbance as estimated;
+        it decays with ``Rollouts.yaw_torque_tau``); 0: none.
     """
 
     x: np.ndarray
@@ -101,6 +105,7 @@ class RolloutStart:
     last_firing: np.ndarray
     pose: np.ndarray
     twist: np.ndarray | None = None
+    yaw_torque: float = 0.0
     # the LU factors at the end of a parent period, so a child continues as one run would
     lu_packed: np.ndarray | None = field(default=None, repr=False)
     lu_valid: int = field(default=0, repr=False)
@@ -156,9 +161,9 @@ def _next_job(typingctx, counter):
 
 
 @njit(nogil=True, cache=True, error_model='numpy')
-def _run_jobs(counter, system, solver, work, state, f_ext, start_x, start_v, start_vold, start_packed,
-              start_lu, job_start, job_t0, job_times, job_offsets, seg_n, seg_h, out_x, out_v,
-              out_vold, out_packed, out_lu, out_status, out_counts):
+def _run_jobs(counter, system, solver, work, state, f_ext, mass, torque0, torque1, inv_tau, start_x, start_v,
+              start_vold, start_packed, start_lu, job_start, job_t0, job_times, job_offsets, seg_n, seg_h, out_x,
+              out_v, out_vold, out_packed, out_lu, out_status, out_counts):
     """Run jobs (one period of one branch each) with the integrator's :func:`run_direct`.
 
     Called by every rollout thread at once, each with its own ``system``, ``work`` and
@@ -174,7 +179,11 @@ def _run_jobs(counter, system, solver, work, state, f_ext, start_x, start_v, sta
     segments of equal step and refactorised when the step changes, as
     ``ImplicitEulerIntegrator.advance`` does. Writes the end state, ``out_status[j]`` (0
     or the failing step's status) and ``out_counts[j]`` = (steps, Newton iterations,
-    factorisations).
+    factorisations). A yaw torque ``torque0 exp(-t inv_tau) + torque1 exp(t inv_tau)`` [N m]
+    about the COM (``t`` on the jobs' clock) acts as ``FrogSimulation`` applies its
+    disturbance: nodal forces (``f_ext``, this thread's) recomputed on the current shape every
+    :data:`DISTURBANCE_INTERVAL_S` of a segment and held over it (here at the interval's
+    mid-time value: the expected torque).
     """
     act_times = system.actuator[2]
     act_offsets = system.actuator[3]
@@ -194,6 +203,8 @@ def _run_jobs(counter, system, solver, work, state, f_ext, start_x, start_v, sta
         work.packed[:] = start_packed[s]
         work.lu_state[0] = np.int64(start_lu[s, 0])
         lu_h = start_lu[s, 1]
+        f_ext[:] = 0.0
+        torqued = torque0 != 0.0 or torque1 != 0.0
         factorisations = work.lu_state[1]
         t = job_t0[j]
         state.time[0] = t
@@ -208,9 +219,17 @@ def _run_jobs(counter, system, solver, work, state, f_ext, start_x, start_v, sta
             if h != lu_h:
                 work.lu_state[0] = 0
             lu_h = h
-            done, status, it, _ = run_direct(system, solver, work, state, f_ext, t, h, n, True)
-            steps += done
-            iters += it
+            chunk = n if not torqued else max(1, int(round(DISTURBANCE_INTERVAL_S / h)))
+            k = 0
+            while k < n and status == STATUS_OK:
+                m = min(chunk, n - k)
+                if torqued:
+                    tm = (t + (k + 0.5 * m) * h) * inv_tau
+                    torque_forces_into(state.x, mass, torque0 * math.exp(-tm) + torque1 * math.exp(tm), f_ext)
+                done, status, it, _ = run_direct(system, solver, work, state, f_ext, t + k * h, h, m, True)
+                steps += done
+                iters += it
+                k += m
             if status != STATUS_OK:
                 break
             t = t + n * h
@@ -248,6 +267,10 @@ class Rollouts:
     threads : int, optional
         Threads the jobs are spread over (default: the CPUs this process may use); one
         simulator is built per thread.
+    yaw_torque_tau : float
+        Time constant [s] with which a start's expected yaw torque decays (the tank's
+        Ornstein-Uhlenbeck torque: its mean given the present; default
+        :data:`~frog_sim.core.yaw_disturbance.TANK_YAW_TORQUE_TAU_S`).
 
     Examples
     --------
@@ -262,7 +285,7 @@ class Rollouts:
     def __init__(self, params: FrogParameters | None = None, *, library=None,
                  kick_time_step: float = DEFAULT_TIME_STEP, coast_time_step: float = COAST_TIME_STEP,
                  kick_window: float = KICK_WINDOW, force_tolerance: float = ROLLOUT_FORCE_TOLERANCE,
-                 threads: int | None = None):
+                 threads: int | None = None, yaw_torque_tau: float = TANK_YAW_TORQUE_TAU_S):
         for name, value in (('kick_time_step', kick_time_step), ('coast_time_step', coast_time_step),
                             ('force_tolerance', force_tolerance)):
             if not (np.isfinite(value) and value > 0):
@@ -272,6 +295,8 @@ class Rollouts:
                              f'{kick_time_step!r} s')
         if not (np.isfinite(kick_window) and kick_window >= 0):
             raise ValueError(f'kick_window = {kick_window!r} s must be >= 0')
+        if not (yaw_torque_tau > 0):
+            raise ValueError(f'yaw_torque_tau = {yaw_torque_tau!r} s must be > 0 (inf: held)')
         if threads is None:
             threads = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count() or 1
         threads = int(threads)
@@ -281,6 +306,7 @@ class Rollouts:
         self.coast_time_step = float(coast_time_step)
         self.kick_window = float(kick_window)
         self.threads = threads
+        self.yaw_torque_tau = float(yaw_torque_tau)
         first = FrogSimulation(params, library=library, force_tolerance=force_tolerance)
         # one simulator per thread: its live arrays are that thread's scratch (+ one for the
         # Python fallback of a job whose fast step failed)
@@ -299,7 +325,8 @@ class Rollouts:
         self._works = tuple(i._work for i in integ)
         self._states = tuple(i._state for i in integ)
         self._solver = integ[0]._solver()
-        self._zero_force = np.zeros(first.integrator.x.size)
+        self._forces = tuple(np.zeros(first.integrator.x.size) for _ in range(threads))   # per thread
+        self._mass = np.ascontiguousarray(first.integrator.mass, dtype=float)
         self._packed_size = first.integrator._work.packed.size
         self._pool = ThreadPoolExecutor(threads, thread_name_prefix='frog-rollouts') if threads > 1 else None
 
@@ -328,7 +355,7 @@ class Rollouts:
         return self._sims[0].limb_strength
 
     # ------------------------------------------------------------------ start states
-    def estimated_start(self, pose, twist, last_fired=None, now: float = 0.0) -> RolloutStart:
+    def estimated_start(self, pose, twist, last_fired=None, now: float = 0.0, yaw_torque: float = 0.0) -> RolloutStart:
         """The start state from what the robot knows: pose, body twist and limb firings.
 
         Parameters
@@ -342,6 +369,9 @@ class Rollouts:
             the clock of ``now`` (a sequence: its latest element). Missing limbs are relaxed.
         now : float
             Time of the decision on that clock [s].
+        yaw_torque : float
+            The tank's yaw torque on the robot now, as estimated [N m] (decays with
+            ``yaw_torque_tau`` through the rollouts); 0: none.
 
         Returns
         -------
@@ -358,6 +388,8 @@ class Rollouts:
         twist = _finite_vector(twist, 'twist', 3)
         if not np.isfinite(now):
             raise ValueError(f'now = {now!r} s must be finite')
+        if not np.isfinite(yaw_torque):
+            raise ValueError(f'yaw_torque = {yaw_torque!r} N m must be finite')
         last = self._last_firing(last_fired, now)
         shape = self.limb_shape(last)
         mass = self.model.mass
@@ -370,7 +402,7 @@ class Rollouts:
         velocities = nodal_velocities(positions, mass, com_velocity, twist[2])
         v = velocities.ravel()
         return RolloutStart(x=positions.ravel(), v=v, v_old=v.copy(), last_firing=last, pose=pose.copy(),
-                            twist=twist.copy())
+                            twist=twist.copy(), yaw_torque=float(yaw_torque))
 
     def limb_shape(self, last_firing) -> np.ndarray:
         """The reference shape with each limb at rest at its eq. 9 curvature at t = 0.
@@ -565,7 +597,8 @@ class Rollouts:
         for wave in range(2 * depth):
             batch = [(key, job) for key, job in jobs.items() if job[1] == wave and job[0] in done]
             if batch:
-                for (key, _), end in zip(batch, self._run_wave([job for _, job in batch], done, stats)):
+                for (key, _), end in zip(batch, self._run_wave([job for _, job in batch], done, stats,
+                                                               (start.yaw_torque, 0.0))):
                     if end is not None:
                         done[key] = end
         transitions = np.full((len(seqs), depth, 6), np.nan)
@@ -584,7 +617,8 @@ class Rollouts:
                 transitions[b, k, 2] = end.pose[2] - start.pose[2]
                 transitions[b, k, 3:] = end.twist
         # the jobs run on the decision's clock; an end handed out is its own t = 0
-        ends = {key: replace(end, last_firing=end.last_firing - len(key) * period)
+        ends = {key: replace(end, last_firing=end.last_firing - len(key) * period,
+                             yaw_torque=start.yaw_torque * self._decay(len(key) * period))
                 for key, end in done.items() if key and not isinstance(key, _FrontGroup)}
         return RolloutResult(sequences=seqs, transitions=transitions, pose=poses, converged=converged, ends=ends,
                              stats=stats)
@@ -625,7 +659,8 @@ class Rollouts:
         result.lead_end = start
         return tree_rows(result, start.pose if from_lead_end else origin, int(depth)), result
 
-    def run_firings(self, start: RolloutStart, firings, duration: float) -> RolloutStart | None:
+    def run_firings(self, start: RolloutStart, firings, duration: float,
+                    yaw_torque_end: float | None = None) -> RolloutStart | None:
         """Simulate ``duration`` [s] from ``start`` with limbs fired at given times (not a primitive
         schedule: what a robot actually fired, e.g. from ``frog/bridge/sent``).
 
@@ -634,6 +669,10 @@ class Rollouts:
         firings : mapping
             Limb name or id -> firing time [s] in [0, duration] on the start's clock (at most one
             per limb).
+        yaw_torque_end : float, optional
+            The yaw torque at the end [N m]: the torque then follows the Ornstein-Uhlenbeck
+            bridge's mean from ``start.yaw_torque`` to it (what a filter that knows both
+            assumes); None: the start's torque decays.
 
         Returns
         -------
@@ -654,11 +693,34 @@ class Rollouts:
         latest = max((ts[-1] for ts in times if ts), default=-np.inf)
         stats = {'jobs': 0, 'steps': 0, 'newton_iterations': 0, 'factorisations': 0, 'fallbacks': 0, 'failed': 0}
         job = ((), 0, 0.0, times, self.period_steps(0.0, float(duration), latest))
-        return self._run_wave([job], {(): start}, stats)[0]
+        n0 = start.yaw_torque
+        if yaw_torque_end is None:
+            torque, n1 = (n0, 0.0), n0 * self._decay(duration)
+        else:
+            torque, n1 = self._bridge(n0, float(yaw_torque_end), float(duration)), float(yaw_torque_end)
+        end = self._run_wave([job], {(): start}, stats, torque)[0]
+        return None if end is None else replace(end, yaw_torque=n1)
 
-    def _run_wave(self, batch, done, stats):
-        """Jobs whose parents are done, in one :func:`_run_jobs` call per thread; their ends."""
-        n_jobs, ndof = len(batch), self._zero_force.size
+    def _bridge(self, n0: float, n1: float, span: float) -> tuple[float, float]:
+        """(A, B) with ``A exp(-t / tau) + B exp(t / tau)`` the mean of the OU torque given ``n0``
+        at 0 and ``n1`` at ``span`` (``[n0 sinh((T - t)/tau) + n1 sinh(t/tau)] / sinh(T/tau)``);
+        constant ``n0`` when it does not decay."""
+        if math.isinf(self.yaw_torque_tau):
+            return n0, 0.0
+        e = math.exp(span / self.yaw_torque_tau)
+        two_sinh = e - 1.0 / e
+        return (n0 * e - n1) / two_sinh, (n1 - n0 / e) / two_sinh
+
+    def _decay(self, t: float) -> float:
+        """The expected yaw torque's factor after ``t`` [s]."""
+        return math.exp(-t / self.yaw_torque_tau)
+
+
+
+    def _run_wave(self, batch, done, stats, torque=(0.0, 0.0)):
+        """Jobs whose parents are done, in one :func:`_run_jobs` call per thread; their ends.
+        ``torque``: (A, B) of the yaw torque ``A exp(-t / tau) + B exp(t / tau)`` [N m] on the jobs' clock."""
+        n_jobs, ndof = len(batch), self._mass.size * 2
         parents = sorted({job[0] for job in batch}, key=str)
         index = {key: i for i, key in enumerate(parents)}
         starts = [done[key] for key in parents]
@@ -693,12 +755,13 @@ class Rollouts:
         out_status = np.empty(n_jobs, dtype=np.int64)
         out_counts = np.zeros((n_jobs, 3), dtype=np.int64)
         counter = np.zeros(1, dtype=np.int64)
-        args = (self._zero_force, start_x, start_v, start_vold, start_packed, start_lu, job_start, job_t0,
-                job_times, job_offsets, seg_n, seg_h, out_x, out_v, out_vold, out_packed, out_lu, out_status,
-                out_counts)
+        args = (self._mass, float(torque[0]), float(torque[1]), 1.0 / self.yaw_torque_tau, start_x, start_v,
+                start_vold, start_packed, start_lu, job_start, job_t0, job_times, job_offsets, seg_n, seg_h, out_x,
+                out_v, out_vold, out_packed, out_lu, out_status, out_counts)
 
         def run(w):
-            _run_jobs(counter, self._systems[w], self._solver, self._works[w], self._states[w], *args)
+            _run_jobs(counter, self._systems[w], self._solver, self._works[w], self._states[w], self._forces[w],
+                      *args)
         if self._pool is None or n_jobs == 1:
             run(0)
         else:
@@ -711,7 +774,7 @@ class Rollouts:
             if out_status[j] != STATUS_OK:
                 stats['fallbacks'] += 1
                 if not self._fallback(parent_start, times, t0, segments, j, out_x, out_v, out_vold, out_packed,
-                                      out_lu, out_counts):
+                                      out_lu, out_counts, torque):
                     stats['failed'] += 1
                     ends.append(None)
                     continue
@@ -727,7 +790,7 @@ class Rollouts:
         return ends
 
     def _fallback(self, start, times, t0, segments, j, out_x, out_v, out_vold, out_packed, out_lu,
-                  out_counts) -> bool:
+                  out_counts, torque=(0.0, 0.0)) -> bool:
         """Redo job ``j`` with ``ImplicitEulerIntegrator.advance`` (step halving, SuperLU), as
         ``FrogSimulation.step`` would after a failed fast step; False if that fails too."""
         from .integrator import ConvergenceError
@@ -735,6 +798,7 @@ class Rollouts:
         integ.actuator.set_activation_times(times)
         integ.set_state(x=start.x, v=start.v)
         integ._state.v_old[:] = start.v_old
+        integ.external_force[:] = 0.0
         if start.lu_packed is not None:
             integ._work.packed[:] = start.lu_packed
             integ._lu_state[0] = start.lu_valid
@@ -742,8 +806,18 @@ class Rollouts:
         integ.time = t0
         steps0, iters0, facts0 = integ.stats.steps, integ.stats.newton_iterations, integ.factorizations
         try:
+            t = t0
             for n, h in segments:
-                integ.advance(n, h)
+                torqued = tuple(torque) != (0.0, 0.0)
+                chunk = max(n, 1) if not torqued else max(1, int(round(DISTURBANCE_INTERVAL_S / h)))
+                for k in range(0, n, chunk):
+                    m = min(chunk, n - k)
+                    if torqued:      # as _run_jobs
+                        tm = t + (k + 0.5 * m) * h
+                        integ.external_force[:] = torque_forces(integ.x, self._mass, torque[0] * self._decay(tm)
+                                                                + torque[1] / self._decay(tm))
+                    integ.advance(m, h)
+                t += n * h
         except ConvergenceError:
             return False
         out_x[j], out_v[j], out_vold[j] = integ.x, integ.v, integ._state.v_old

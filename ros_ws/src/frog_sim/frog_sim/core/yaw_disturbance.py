@@ -26,6 +26,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
+
+#: The tank's yaw torque identified on the authors' hardware runs (``frog-sim disturbance``,
+#: jointly with the kick spread; frog_twin's test_kick_variability.py checks them): stationary
+#: sd [N m] and time constant [s]. The twin's robot draws it; the planner's rollouts estimate it
+#: (:class:`~frog_sim.core.limb_identification.LimbIdentification`).
+TANK_YAW_TORQUE_SD = 9.2e-5
+TANK_YAW_TORQUE_TAU_S = 1.25
 
 
 class YawDisturbance:
@@ -54,9 +62,31 @@ class YawDisturbance:
 
 def torque_forces(x: np.ndarray, mass: np.ndarray, torque: float) -> np.ndarray:
     """Nodal forces (2N,) [N] of a pure torque [N m] about the COM, spread by mass."""
-    p = np.asarray(x, dtype=float).reshape(-1, 2)
-    m = np.asarray(mass, dtype=float)
-    r = p - (m[:, None] * p).sum(axis=0) / m.sum()
-    inertia = float((m * (r ** 2).sum(axis=1)).sum())
-    f = (m * torque / inertia)[:, None] * np.column_stack([-r[:, 1], r[:, 0]])
-    return f.ravel()
+    out = np.empty(np.asarray(x).size)
+    torque_forces_into(np.ascontiguousarray(x, dtype=float).ravel(), np.ascontiguousarray(mass, dtype=float),
+                       float(torque), out)
+    return out
+
+
+@njit(nogil=True, cache=True)
+def torque_forces_into(x, mass, torque, out):
+    """:func:`torque_forces` written into ``out`` (2N,): ``f_i = m_i N perp(r_i) / I`` (also
+    called inside the compiled rollouts, once per job)."""
+    n = mass.shape[0]
+    total = 0.0
+    cx = 0.0
+    cy = 0.0
+    for i in range(n):
+        total += mass[i]
+        cx += mass[i] * x[2 * i]
+        cy += mass[i] * x[2 * i + 1]
+    cx /= total
+    cy /= total
+    inertia = 0.0
+    for i in range(n):
+        rx, ry = x[2 * i] - cx, x[2 * i + 1] - cy
+        inertia += mass[i] * (rx * rx + ry * ry)
+    scale = torque / inertia
+    for i in range(n):
+        out[2 * i] = -mass[i] * scale * (x[2 * i + 1] - cy)
+        out[2 * i + 1] = mass[i] * scale * (x[2 * i] - cx)

@@ -9,15 +9,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from frog_sim.core.yaw_disturbance import TANK_YAW_TORQUE_SD, TANK_YAW_TORQUE_TAU_S
+
 HARDWARE_PERIOD_S = 1.43     # decision period measured in the authors' closed-loop logs
 LIMB_STRENGTH_SD = 0.1       # relative spread of the four limbs' kick strengths (real limbs differ)
 # The robot's heading per period varies about the model's (4.3 deg sd, correlated over 1-2
 # periods): a slowly varying yaw torque (frog_sim.core.yaw_disturbance) and a small
 # per-firing kick spread, identified jointly on the hardware runs' residual autocovariance
-# by `frog-sim disturbance` (runs/disturbance; frog_twin test_kick_variability.py checks them)
+# by `frog-sim disturbance` (runs/disturbance; frog_twin test_kick_variability.py checks them);
+# the yaw torque's values are frog_sim's, where the planner's rollouts estimate it too
 KICK_STRENGTH_SD = 0.05
-YAW_DISTURBANCE_SD = 9.2e-5    # [N m]
-YAW_DISTURBANCE_TAU_S = 1.25
+YAW_DISTURBANCE_SD = TANK_YAW_TORQUE_SD          # [N m]
+YAW_DISTURBANCE_TAU_S = TANK_YAW_TORQUE_TAU_S    # [s]
 
 
 @dataclass(frozen=True)
