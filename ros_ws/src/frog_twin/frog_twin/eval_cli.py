@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from frog_planner.core.settings import PathSettings, PlannerSettings, add_arguments, from_arguments
+from frog_sim.core.yaw_disturbance import TANK_YAW_TORQUE_SD
 
 EPILOG = """examples:
   frog-planner-eval --library runs/library/default.npz --path all --out runs/eval
@@ -60,7 +61,8 @@ def _run(args, case, path, depth, metric, model_cache, seed=None, start="estimat
     if key not in model_cache:
         model_cache[key] = TransitionModel.load(args.library, **settings.model_kwargs())
     simulator = (SimulatorTransitions(rollouts, start=start, lead=args.lead, beam=args.beam,
-                                      identify=args.identify and start == "estimated", reanchor=args.reanchor)
+                                      identify=args.identify and start == "estimated", reanchor=args.reanchor,
+                                      yaw_torque_sd=args.yaw_torque_sd)
                  if args.transitions == "simulator" else None)
     res = run_closed_loop(path, model_cache[key], settings, start_offset=(0.0, args.lateral_offset, 0.0),
                           max_time=case.duration, transitions=args.transitions, simulator=simulator,
@@ -144,6 +146,9 @@ def main(argv=None) -> int:
     ap.add_argument("--identify", action=argparse.BooleanOptionalAction, default=True,
                     help="transitions simulator from the estimated start: learn the robot's limb strengths from "
                          "its motion and roll out with them (rollout_node's identify_limbs)")
+    ap.add_argument("--yaw-torque-sd", type=float, default=TANK_YAW_TORQUE_SD,
+                    help="with --identify: also estimate the tank's yaw torque of this stationary sd [N m] and "
+                         "roll out with it (rollout_node's yaw_torque_sd; default %(default)s); 0 = assume none")
     ap.add_argument("--twin-seeds", default=None,
                     help="comma-separated seeds: the twin's robot of each (limb strengths, kick spread, yaw "
                          "torque, as frog-twin --seed); default the nominal robot")

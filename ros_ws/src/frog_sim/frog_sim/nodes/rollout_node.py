@@ -17,7 +17,10 @@ say where the robot went since the previous one, which the rollouts predict agai
 limbs as fired (:class:`frog_sim.core.limb_identification.LimbIdentification`, an extended
 Kalman filter on the log-strengths). The trees are then rolled out with the estimate, which
 ``diagnostics`` reports per limb (``strength_FL`` ... and their sd); ``~/forget_limbs``
-starts over (a new robot, a repaired limb).
+starts over (a new robot, a repaired limb). With ``yaw_torque_sd`` > 0 (default: the tank's
+identified disturbance) the same filter estimates the tank's slowly varying yaw torque, and
+the trees are rolled out with it decaying over ``yaw_torque_tau_s`` (``yaw_torque_Nm`` on
+``diagnostics``); 0 assumes a calm tank.
 
     ros2 run frog_sim rollout_node --ros-args -p threads:=2
     ros2 service call /frog/rollouts soft_robot_interfaces/srv/Rollouts "{period: 1.43, depth: 1}"
@@ -40,6 +43,7 @@ from frog_sim.core.limb_identification import LimbIdentification
 from frog_sim.core.rollouts import COAST_TIME_STEP, KICK_WINDOW, ROLLOUT_FORCE_TOLERANCE, Rollouts
 from frog_common.primitives import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import DEFAULT_TIME_STEP
+from frog_sim.core.yaw_disturbance import TANK_YAW_TORQUE_SD, TANK_YAW_TORQUE_TAU_S
 
 MAX_DEPTH = 2
 
@@ -51,6 +55,10 @@ PARAMS = [
     Param("force_tolerance", ROLLOUT_FORCE_TOLERANCE, "Newton residual tolerance [N]", min=1e-9, max=1e-2),
     Param("identify_limbs", True, "learn the robot's limb strengths from consecutive requests (stamp, pose, twist, "
           "firings) and roll out with them; false: the nominal limbs", live=True),
+    Param("yaw_torque_sd", TANK_YAW_TORQUE_SD, "stationary sd of the tank's yaw torque [N m] the limb filter "
+          "estimates alongside (with identify_limbs); 0 = assume none", min=0.0, max=1e-2, live=True),
+    Param("yaw_torque_tau_s", TANK_YAW_TORQUE_TAU_S, "time constant of the tank's yaw torque [s]: the estimate "
+          "decays with it through each rollout", min=0.05, max=60.0),
 ]
 
 
@@ -67,11 +75,12 @@ class RolloutNode(Node):
         t0 = time.monotonic()
         self.rollouts = Rollouts(threads=p["threads"] or None, kick_time_step=p["kick_time_step"],
                                  coast_time_step=max(p["coast_time_step"], p["kick_time_step"]),
-                                 kick_window=p["kick_window"], force_tolerance=p["force_tolerance"])
+                                 kick_window=p["kick_window"], force_tolerance=p["force_tolerance"],
+                                 yaw_torque_tau=p["yaw_torque_tau_s"])
         # compile and warm up now, not in the first decision
         warm = self.rollouts.estimated_start((0.0, 0.0, 0.0), (0.01, 0.0, 0.0))
         self.rollouts.rollout_batch(warm, [("B",), ("C",)], period=0.5)
-        self.identification = LimbIdentification(self.rollouts)
+        self.identification = LimbIdentification(self.rollouts, torque_sd=p["yaw_torque_sd"])
         self.requests = self.failures = 0
         self.last_compute = math.nan
         self.create_service(RolloutsSrv, "frog/rollouts", self.on_request)
@@ -86,18 +95,20 @@ class RolloutNode(Node):
         level = OK if not self.failures else WARN
         values = {"requests": self.requests, "failures": self.failures, "last_compute_s": self.last_compute,
                   "threads": self.rollouts.threads, "identify_limbs": self.cfg["identify_limbs"],
-                  "identification_updates": self.identification.updates}
+                  "identification_updates": self.identification.updates,
+                  "yaw_torque_Nm": self.identification.torque,
+                  "yaw_torque_sd_Nm": self.identification.torque_estimate_sd}
         for limb, value in self.rollouts.limb_strength.items():
             values[f"strength_{limb}"] = value
             values[f"strength_sd_{limb}"] = self.identification.sd[limb]
         return level, "ready", values
 
     def on_parameters(self, changed: dict) -> None:
-        if "identify_limbs" in changed:
+        if "identify_limbs" in changed or "yaw_torque_sd" in changed:
             self.forget_limbs()
 
     def forget_limbs(self) -> None:
-        self.identification.reset()
+        self.identification = LimbIdentification(self.rollouts, torque_sd=self.cfg["yaw_torque_sd"])
         self.rollouts.set_limb_strength(None)
 
     def on_forget_limbs(self, request, response):

@@ -63,10 +63,13 @@ class SimulatorTransitions:
         Decide at the execution, on the pose tracked then, with the tree rolled out from the
         observation ``lead`` earlier chained from that pose (planner_node's ``reanchor``); false:
         decide on the observation's pose with the tree's own prediction of the lead.
+    yaw_torque_sd : float
+        With ``identify``: also estimate the tank's yaw torque, of this stationary sd [N m]
+        (rollout_node's ``yaw_torque_sd``); 0: assume none.
     """
 
     def __init__(self, rollouts, start: str = "estimated", lead: float = 0.0, beam: int = 0,
-                 identify: bool = False, reanchor: bool = False):
+                 identify: bool = False, reanchor: bool = False, yaw_torque_sd: float = 0.0):
         if start not in ROLLOUT_STARTS:
             raise ValueError(f"rollout start {start!r} unknown; expected one of {ROLLOUT_STARTS}")
         if not (np.isfinite(lead) and 0.0 <= lead <= 5.0):
@@ -80,7 +83,7 @@ class SimulatorTransitions:
         self.identification = None
         if identify:
             from frog_sim.core.limb_identification import LimbIdentification
-            self.identification = LimbIdentification(rollouts)
+            self.identification = LimbIdentification(rollouts, torque_sd=yaw_torque_sd)
 
     def reset(self) -> None:
         """A new run: the nominal robot, nothing learned."""
