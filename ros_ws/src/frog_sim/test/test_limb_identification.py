@@ -11,6 +11,7 @@ from frog_common.primitives import LIMB_NAMES
 from frog_sim.core.limb_identification import LimbIdentification
 from frog_sim.core.rollouts import Rollouts
 from frog_sim.core.simulation import FrogSimulation
+from frog_sim.core.yaw_disturbance import TANK_YAW_TORQUE_SD
 
 PERIOD = 1.43
 TRUTH = {"FL": 1.2, "FR": 0.75, "BL": 1.1, "BR": 0.95}
@@ -65,6 +66,20 @@ def test_the_limbs_of_a_simulated_robot_are_found(rollouts, lead):
         assert ident.sd[limb] < 0.06
     ident.start(*observed(sim))
     assert rollouts.limb_strength == pytest.approx(ident.strengths)
+
+
+def test_the_limbs_are_found_while_estimating_a_tank_torque_too(rollouts):
+    """rollout_node's default: the filter also carries the tank's yaw torque. In a calm tank the
+    limbs are still found within 0.06 (a lasting turn is the limbs', not the torque's, which
+    fades within 1.25 s) and the torque estimate stays within one sd of 0."""
+    sim = FrogSimulation()
+    sim.set_limb_strength(TRUTH)
+    ident = LimbIdentification(rollouts, torque_sd=TANK_YAW_TORQUE_SD)
+    swim(ident, sim, "BCDBEFBGHBCDBEFBGHBB")
+    assert ident.updates == 19
+    for limb, want in TRUTH.items():
+        assert ident.strengths[limb] == pytest.approx(want, abs=0.06), (limb, ident.strengths)
+    assert abs(ident.torque) < TANK_YAW_TORQUE_SD, ident.torque
 
 
 def test_a_nominal_robot_stays_nominal_and_nothing_fired_teaches_nothing(rollouts):
