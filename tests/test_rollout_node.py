@@ -162,6 +162,8 @@ def test_the_limbs_are_learned_from_consecutive_requests_and_forgotten_on_reques
     probe.spin_until(lambda: float(diag.get("identification_updates", 0)) >= 19, 10, "19 updates in diagnostics")
     for limb, want in truth.items():
         assert float(diag[f"strength_{limb}"]) == pytest.approx(want, abs=0.06), diag
+    # the tank torque is estimated alongside (default yaw_torque_sd); this tank is calm
+    assert 0.0 < float(diag["yaw_torque_sd_Nm"]) < 9.2e-5 and abs(float(diag["yaw_torque_Nm"])) < 9.2e-5, diag
     learned = np.asarray(probe.call(client, _request(1), timeout=60).transitions).reshape(-1, 6)
     reply = probe.call(forget, Trigger.Request(), timeout=10)
     assert reply.success and "limbs back to nominal; were FL 1." in reply.message

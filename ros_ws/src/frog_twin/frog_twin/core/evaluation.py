@@ -23,6 +23,7 @@ from frog_planner.core.planner import Planner
 from frog_planner.core.settings import PlannerSettings
 from frog_planner.core.transition_model import TransitionModel
 from frog_planner.core.tree_search import tree_from_rows
+from frog_sim.core.yaw_disturbance import TANK_YAW_TORQUE_SD
 
 from .metrics import samples_before_finish  # noqa: F401  (re-exported for callers of this module)
 from .realism import Realism
@@ -65,11 +66,12 @@ class SimulatorTransitions:
         decide on the observation's pose with the tree's own prediction of the lead.
     yaw_torque_sd : float
         With ``identify``: also estimate the tank's yaw torque, of this stationary sd [N m]
-        (rollout_node's ``yaw_torque_sd``); 0: assume none.
+        (rollout_node's ``yaw_torque_sd``, and its default); 0: assume none.
     """
 
     def __init__(self, rollouts, start: str = "estimated", lead: float = 0.0, beam: int = 0,
-                 identify: bool = False, reanchor: bool = False, yaw_torque_sd: float = 0.0):
+                 identify: bool = False, reanchor: bool = False,
+                 yaw_torque_sd: float = TANK_YAW_TORQUE_SD):
         if start not in ROLLOUT_STARTS:
             raise ValueError(f"rollout start {start!r} unknown; expected one of {ROLLOUT_STARTS}")
         if not (np.isfinite(lead) and 0.0 <= lead <= 5.0):
