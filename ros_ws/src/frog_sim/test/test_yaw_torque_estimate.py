@@ -66,6 +66,30 @@ def test_a_constant_yaw_torque_is_frog_simulation_s_tank_torque():
     assert res.ends[seq].yaw_torque == TORQUE     # carried on (no decay)
 
 
+def test_a_failed_fast_step_under_a_torque_is_redone_as_frog_simulation_does():
+    """With 3 Newton iterations the kick's fast steps fail and the job is redone with step halving
+    (``Rollouts._fallback``), the torque applied there as in the kernel: the same nodes as
+    FrogSimulation with the same limit and its tank torque."""
+    seq = ("C",)
+    with Rollouts(threads=1, yaw_torque_tau=math.inf) as ro:
+        for sim in ro._sims:
+            sim.integrator.max_iterations = 3
+        ro._solver = ro._sims[0].integrator._solver()
+        start = ro.estimated_start(POSE, TWIST, FIRED, yaw_torque=TORQUE)
+        res = ro.rollout_batch(start, [seq], period=PERIOD)
+        plan = ro.step_plan(start, seq, PERIOD)
+        sim = _reference_sim(start, ro._sims[0].integrator.force_tolerance)
+    assert res.converged.all() and res.stats["fallbacks"] >= 1 and res.stats["failed"] == 0
+    sim.integrator.max_iterations = 3
+    _tank(sim, TORQUE, 1e12)
+    sim.execute_primitive("C")
+    for n, h in plan[0]:
+        sim.time_step = h
+        sim.step(n)
+    assert sim.integrator.stats.halvings > 0
+    assert np.abs(res.ends[seq].x - sim.integrator.x).max() < 1e-10
+
+
 def test_the_expected_torque_decays_with_tau_and_is_carried_to_the_ends():
     with Rollouts(threads=1, yaw_torque_tau=1.25) as ro:
         start = ro.estimated_start(POSE, TWIST, yaw_torque=TORQUE)
