@@ -11,6 +11,8 @@ repeat, so both see the same machine load; CPU time is the process's, all thread
 * throughput of both in simulated seconds per CPU second and per wall second (a depth-2
   decision counts its 90 distinct periods), their ratio, and the wall time of the decisions
   against the budget of 0.7 periods;
+* a depth-2 decision under an estimated tank yaw torque (rollout_node's default: forces
+  recomputed every 20 ms);
 * the rollouts' error against the baseline from the same start states (the cost of the
   coarser step plan and tolerance);
 * what the estimated start loses against the exact one: states taken from a running
@@ -30,6 +32,7 @@ import math
 import os
 import statistics
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +41,7 @@ from frog_sim.core.actuation import ActuationLibrary
 from frog_sim.core.rollouts import Rollouts
 from frog_common.primitives import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import FrogSimulation
+from frog_sim.core.yaw_disturbance import TANK_YAW_TORQUE_SD
 
 PERIOD = 1.43            # s, the hardware's decision period
 BUDGET_SHARE = 0.7       # of the period, for a decision
@@ -174,6 +178,7 @@ def main(argv=None):
 
     beam = [(a, b) for a in PRIMITIVE_NAMES[:BEAM] for b in PRIMITIVE_NAMES]
     base_cpu, base_wall, d1_cpu, d1_wall, d2_cpu, d2_wall, bm_cpu, bm_wall = [], [], [], [], [], [], [], []
+    tq_cpu, tq_wall = [], []
     base_rows, batch_rows, stats = None, None, None
     for _ in range(args.repeats):
         rows, cpu, wall = [], 0.0, 0.0
@@ -199,6 +204,10 @@ def main(argv=None):
             _, c, w = timed(lambda: ro.rollout_batch(start, beam, period=period))
             bm_cpu.append(c)
             bm_wall.append(w)
+            torqued = replace(start, yaw_torque=TANK_YAW_TORQUE_SD)
+            _, c, w = timed(lambda: ro.rollout_batch(torqued, pairs, period=period))
+            tq_cpu.append(c)
+            tq_wall.append(w)
         batch_rows = np.array(r1)
     med = statistics.median
     b_cpu, b_wall = med(base_cpu), med(base_wall)
@@ -230,7 +239,8 @@ def main(argv=None):
           f'{rate["d2 wall"] / rate["base wall"]:.2f}x wall)')
     print(f'  decision wall time (budget {BUDGET_SHARE:g} x {period:g} s = {budget:.2f} s), median [min-max]:')
     for name, wall, cpu, n in (('depth 1', d1_wall, d1_cpu, len(prims)), ('depth 2', d2_wall, d2_cpu, n2),
-                               (f'depth 2, beam {BEAM}', bm_wall, bm_cpu, BEAM + len(beam))):
+                               (f'depth 2, beam {BEAM}', bm_wall, bm_cpu, BEAM + len(beam)),
+                               (f'depth 2 under a tank torque of {TANK_YAW_TORQUE_SD:g} N m', tq_wall, tq_cpu, n2)):
         verdict = 'within' if med(wall) <= budget else 'OVER'
         cores = med(c / w for c, w in zip(cpu, wall))
         print(f'    {name}: {med(wall):.3f} s wall [{min(wall):.3f}-{max(wall):.3f}], {med(cpu):.3f} s CPU '
