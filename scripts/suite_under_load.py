@@ -6,6 +6,8 @@ on). The busy processes spin a CPU core each for the whole series, so the suite'
 get what a loaded 2-core machine leaves them. The series stops at the first failed run unless
 ``--keep-going``. Each run's output goes to ``OUT/run_K.log``; the summary (one row per run: exit
 code, pytest's result line, wall and CPU time) is printed and written to ``OUT/summary.md``.
+Ctrl-C, SIGTERM (``kill``, ``timeout``) or SIGHUP stop the run under way (SIGINT to its process
+group, as Ctrl-C in a terminal) and the busy processes, and still write the summary.
 
 Examples:
   python scripts/suite_under_load.py                                   # the whole suite, 5 x, 2 busy
@@ -52,15 +54,22 @@ def result_line(log: Path) -> str:
     return found
 
 
+def _stop_signal(signum, frame):
+    """SIGTERM, SIGHUP: stop as Ctrl-C does (the busy processes would otherwise spin on)."""
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
 def run_once(cmd: list[str], log: Path) -> tuple[int, float, float]:
     """Exit code, wall seconds and CPU seconds (user + system, the run and all it waited for)."""
     t0 = time.monotonic()
     with open(log, "w") as f:
-        p = subprocess.Popen(cmd, cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        # its own process group: a stop reaches pytest under ./dev's shell, not the shell alone
+        p = subprocess.Popen(cmd, cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                             start_new_session=True)
         try:
             _, status, usage = os.wait4(p.pid, 0)
         except KeyboardInterrupt:
-            p.send_signal(signal.SIGINT)
+            os.killpg(p.pid, signal.SIGINT)
             p.wait()
             raise
         p.returncode = os.waitstatus_to_exitcode(status)
@@ -81,6 +90,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     cmd = [str(ROOT / "dev"), "test", *args.pytest_args]
     rows, failed = [], 0
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, _stop_signal)
     busy = start_busy(args.busy)
     try:
         for k in range(1, args.runs + 1):
@@ -94,8 +105,8 @@ def main(argv=None) -> int:
                 failed += 1
                 if not args.keep_going:
                     break
-    except KeyboardInterrupt:
-        print("suite_under_load: stopped (Ctrl-C)", file=sys.stderr)
+    except KeyboardInterrupt as stop:
+        print(f"suite_under_load: stopped ({stop.args[0] if stop.args else 'Ctrl-C'})", file=sys.stderr)
     finally:
         stop_busy(busy)
     table = ["| run | exit | pytest | wall s | CPU s |", "|---|---|---|---|---|"]

@@ -1,6 +1,9 @@
 """scripts/suite_under_load.py: its busy processes load the CPU, its runs report exit code and CPU
 time as the kernel counts them, and it reads pytest's result line in both output styles."""
 
+import os
+import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -47,3 +50,71 @@ def test_result_line_of_both_pytest_styles(tmp_path):
     assert sul.result_line(log) == "5 passed in 3.21s"
     log.write_text("ImportError: no module named x\n")
     assert sul.result_line(log) == ""
+
+
+def _children(pid):
+    """Pids of the processes whose parent is ``pid``, with their command lines."""
+    out = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if int((d / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    out[int(d.name)] = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+            except (OSError, ValueError, IndexError):
+                pass
+    return out
+
+
+def test_sigterm_stops_the_run_and_the_busy_processes(tmp_path):
+    """``kill`` (SIGTERM) of the driver mid-run: the run under way is stopped (pytest too, under
+    ./dev's shell), the busy process does not spin on, and the summary is still written."""
+    slow = tmp_path / "test_slow.py"
+    slow.write_text("import time\n\ndef test_slow():\n    time.sleep(300)\n")
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, str(REPO / "scripts" / "suite_under_load.py"), "--runs", "1",
+                             "--busy", "1", "--out", str(out), "--", "-n", "0", "-p", "no:cacheprovider", str(slow)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        end = time.monotonic() + 120
+        busy = {}
+        while time.monotonic() < end and not (busy and (out / "run_1.log").exists()
+                                              and "test_slow.py" in (out / "run_1.log").read_text()):
+            busy = {p: c for p, c in _children(proc.pid).items() if sul.BUSY_LOOP in c}
+            time.sleep(0.2)
+        assert busy, _children(proc.pid)
+        proc.send_signal(signal.SIGTERM)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        # what a failing driver leaves behind (only these busy pids, not another series' busy loops)
+        leftovers = [p for p in busy if p in _running_with(sul.BUSY_LOOP)] + _running_with(str(slow))
+    try:
+        assert proc.returncode == 1, (stdout, stderr)
+        assert "stopped (SIGTERM)" in stderr
+        assert "0 of 0 run(s) passed" in (out / "summary.md").read_text()
+        for pid in busy:
+            assert not Path(f"/proc/{pid}").exists() or "Z" in Path(f"/proc/{pid}/stat").read_text().split()[2], pid
+        # pytest under ./dev's shell stopped too, not left sleeping
+        end = time.monotonic() + 30
+        while time.monotonic() < end and _running_with(str(slow)):
+            time.sleep(0.2)
+        assert not _running_with(str(slow))
+    finally:
+        for pid in leftovers:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+
+
+def _running_with(arg):
+    pids = []
+    for d in Path("/proc").iterdir():
+        try:
+            if d.name.isdigit() and arg in (d / "cmdline").read_bytes().decode(errors="replace") \
+                    and (d / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z":
+                pids.append(int(d.name))
+        except OSError:
+            pass
+    return pids
