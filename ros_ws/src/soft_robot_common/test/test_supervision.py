@@ -140,6 +140,9 @@ def test_a_node_is_recovering_from_its_exit_until_its_restart_is_ready(tmp_path)
     try:
         sup.process("tracker").send(signal.SIGKILL)
         sup.process("planner").send(signal.SIGKILL)
+        # both gone before the supervisor looks (under load one can die a poll later than the other)
+        for name in ("tracker", "planner"):
+            sup.process(name).wait(timeout=20.0)
         end = time.monotonic() + 20.0
         while time.monotonic() < end and not (len(starts) == 2 and sup.recovering() == []):
             sup.poll()
