@@ -7,6 +7,7 @@ and firing, and the recording is compared with what it saw.
 """
 
 import json
+import math
 import subprocess
 import sys
 import warnings
@@ -62,9 +63,15 @@ def test_recoverable_faults_complete_the_path_with_nothing_fired_on_stale_state(
     assert rep["stale_firings"] == [], rep["stale_firings"][:5]
     assert rep["n_firings"] >= 10
     assert rep["recorder_lost"] == 0, rep["recorder"]
+    # a hung tracker holds every recovery until it is back (no odometry, no following): the faults
+    # that ended before its bound get the same extra time (under load, session 23: the planner killed
+    # at 9 s recovered at 27 s, with the tracker killed at 3 s, hung, and back at 27 s)
+    extra = (RESTART_READY_TIMEOUT_S + 5) * hung.count("tracker_node")
+    tracker_back = max((pf["end_s"] + 15 + extra for pf in rep["per_fault"] if pf["fault"].startswith("kill:tracker")),
+                       default=-math.inf)
+
     def bound(pf):
-        extra = (RESTART_READY_TIMEOUT_S + 5) * hung.count("tracker_node")
-        return 15 + extra * pf["fault"].startswith("kill:tracker")
+        return 15 + extra * (pf["end_s"] < tracker_back)
     assert all(pf["recovery_s"] is not None and pf["recovery_s"] < bound(pf) for pf in rep["per_fault"]), \
         rep["per_fault"]
     assert m["unclean_stops"] == [], m["unclean_stops"]
