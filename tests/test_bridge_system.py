@@ -27,6 +27,22 @@ EXPECTED = {"A": ["h 1 0"], "B": ["h 1 0", "h 2 3"], "C": ["h 0", "h 2 3"], "D":
             "E": ["h 0", "h 2"], "F": ["h 1", "h 3"], "G": ["h 0"], "H": ["h 1"], "I": []}
 
 
+def publisher_ready(probe, pub, timeout=30.0):
+    """Until ``pub`` (the probe's) has matched every reader the graph shows on its topic: a message
+    published now is delivered. The graph shows a subscription before this writer has matched it,
+    and a reliable, volatile message published in between is lost (graph_watch.wait_matched)."""
+    probe.spin_until(lambda: pub.get_subscription_count() >= max(1, probe.node.count_subscribers(pub.topic_name)),
+                     timeout, f"every subscriber on {pub.topic_name} matched by the probe's publisher")
+
+
+def heard_by(probe, node_name, timeout=30.0):
+    """Until ``node_name`` has discovered every subscription the probe made so far, so that what it
+    publishes reaches them: one of its periodic diagnostics reached a subscription made after them
+    (Fast DDS announces a participant's endpoints in creation order; graph_watch.wait_heard)."""
+    probe.wait_heard(DiagnosticArray, "/diagnostics", timeout, QOS,
+                     accept=lambda m: any(st.name.startswith(node_name + ":") for st in m.status))
+
+
 def read_log(path):
     with open(path) as f:
         return [(float(r["wall_time_s"]), r["line"], r["result"]) for r in csv.DictReader(f)]
@@ -115,10 +131,9 @@ def test_each_primitive_becomes_the_firmware_lines_in_order_and_time(launch, pro
     probe.node.create_subscription(LimbActivation, "/frog/bridge/sent", sent.append, QOS)
     probe.node.create_subscription(LimbActivation, "/frog/limb_activation", fired.append, QOS)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
-    probe.wait_for_subscriber("/frog/primitive")
-    probe.wait_for_topic("/frog/bridge/sent")
-    probe.wait_for_topic("/frog/limb_activation")
-    probe.spin_for(0.3)
+    publisher_ready(probe, pub)
+    heard_by(probe, "bridge_node")                  # its frog/bridge/sent reaches us
+    heard_by(probe, "robot_emulator")               # its frog/limb_activation reaches us
     publish_primitive(probe, pub, "I")              # warm-up: the first sample pays for DDS matching
     probe.spin_for(0.5)
     marks = {}
@@ -167,7 +182,7 @@ def test_imu_lines_become_imu_messages(launch, probe, tmp_path, order):
     imu = []
     probe.node.create_subscription(Imu, "/frog/imu", imu.append, QOS)
     odom_pub = probe.node.create_publisher(Odometry, "/frog/sim/odom", QOS)
-    probe.wait_for_subscriber("/frog/sim/odom")
+    publisher_ready(probe, odom_pub)
     for yaw in (0.6, -2.5):
         odom = Odometry()
         odom.pose.pose.orientation.z, odom.pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
@@ -193,8 +208,7 @@ def test_emergency_latches_until_cleared_and_protection_refuses(launch, probe, t
     emu, bridge, log = start_pair(launch, probe, tmp_path, emulator_params={"imu_rate_hz": 0.0})
     diag = Diag(probe)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
-    probe.wait_for_subscriber("/frog/primitive")
-    probe.spin_for(1.0)                 # both ends of the DDS link matched before the first sample
+    publisher_ready(probe, pub)
 
     # limb protection: H (FR) twice 0.3 s apart -> the second is refused and counted
     publish_primitive(probe, pub, "H")
@@ -231,8 +245,7 @@ def test_emergency_latches_until_cleared_and_protection_refuses(launch, probe, t
     # other than the bridge's is refused
     from soft_robot_interfaces.msg import LimbActivation
     limb_pub = probe.node.create_publisher(LimbActivation, "/frog/limb_command", QOS)
-    probe.wait_for_subscriber("/frog/limb_command")
-    probe.spin_for(0.5)
+    publisher_ready(probe, limb_pub)
     probe.spin_for(max(0.0, fired_b[-1][0] + 0.85 - time.time()))    # past the limbs' 0.8 s interval
     t_cmd = time.time()
     limb_pub.publish(LimbActivation(limbs=[3, 0], pulse_duration=0.2))
@@ -247,7 +260,7 @@ def test_non_finite_pulse_length_is_refused_and_fires_nothing(launch, probe, tmp
     from soft_robot_interfaces.msg import LimbActivation
     emu, bridge, log = start_pair(launch, probe, tmp_path, emulator_params={"imu_rate_hz": 0.0})
     limb_pub = probe.node.create_publisher(LimbActivation, "/frog/limb_command", QOS)
-    probe.wait_for_subscriber("/frog/limb_command")
+    publisher_ready(probe, limb_pub)
     t_cmd = time.time()
     for bad in (float("nan"), float("inf"), -1.0):
         limb_pub.publish(LimbActivation(limbs=[1], pulse_duration=bad))
@@ -271,7 +284,8 @@ def test_unplug_replug_reconnects_without_stale_commands_and_stall_is_reported(l
     diag = Diag(probe)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     odom_pub = probe.node.create_publisher(Odometry, "/frog/sim/odom", QOS)
-    probe.wait_for_subscriber("/frog/sim/odom")
+    publisher_ready(probe, pub)
+    publisher_ready(probe, odom_pub)
     odom = Odometry()
     odom.pose.pose.orientation.w = 1.0
     odom_pub.publish(odom)
@@ -356,7 +370,7 @@ def test_fuzz_from_the_robot_side_bridge_stays_up(launch, probe, serial_pair):
     imu = []
     probe.node.create_subscription(Imu, "/frog/imu", imu.append, QOS)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
-    probe.wait_for_subscriber("/frog/primitive")
+    publisher_ready(probe, pub)
     good = b"Central: Q 0.9239 0.0000 0.0000 0.3827\r\n"     # yaw 45 deg
     # the bridge's Imu publisher may match this probe later than its primitive subscriber did (one run
     # beside two busy processes lost the first burst's Imu so): a yaw-0 line until an Imu comes back
@@ -445,7 +459,10 @@ def test_end_to_end_primitive_moves_the_simulated_frog(launch, probe, tmp_path):
                                   emulator_params={"imu_rate_hz": 20.0, "use_sim_time": True})
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     diag = Diag(probe)
-    probe.wait_for_subscriber("/frog/primitive")
+    publisher_ready(probe, pub)
+    # the emulator must have matched our frog/limb_activation reader (session 23, under load: it fired
+    # both pulses and none reached the probe within 5 s; the graph had shown its publisher)
+    heard_by(probe, "robot_emulator")
     probe.spin_until(lambda: odom and imu, 15, "odometry and the IMU from the emulator")
     probe.spin_until(lambda: diag.stamp > 0, 10, "the bridge's clock to follow /clock")
     start = odom[-1].pose.pose.position
@@ -478,8 +495,7 @@ def test_shutdown_between_front_and_rear_sends_no_rear(launch, probe, tmp_path):
     emu, bridge, log = start_pair(launch, probe, tmp_path, bridge_params={"pulse_ms": 300},
                                   emulator_params={"imu_rate_hz": 0.0})
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
-    probe.wait_for_subscriber("/frog/primitive")
-    probe.spin_for(1.0)
+    publisher_ready(probe, pub)
     publish_primitive(probe, pub, "B")
     wait_h_lines(log, 1, timeout=3)
     assert bridge.stop() == 0 and bridge.stopped_cleanly
@@ -497,8 +513,8 @@ def test_frog_stop_cancels_the_pending_pulse_and_latches_until_cleared(launch, p
                                   emulator_params={"imu_rate_hz": 0.0})
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     stop = probe.node.create_publisher(Empty, "/frog/stop", QOS)
-    probe.wait_for_subscriber("/frog/stop")
-    probe.spin_for(1.0)
+    publisher_ready(probe, pub)
+    publisher_ready(probe, stop)
     publish_primitive(probe, pub, "B")          # front now, rear 300 ms later
     fired_b = wait_h_lines(log, 1, timeout=3)
     stop.publish(Empty())
@@ -531,7 +547,7 @@ def test_watchdog_cancels_the_pending_rear_when_the_planner_goes_silent(launch, 
                         timeout=10)
     diag = Diag(probe)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
-    probe.wait_for_subscriber("/frog/primitive")
+    publisher_ready(probe, pub)
     probe.spin_until(lambda: diag.values.get("watchdog") == "waiting", 10, "diagnostics: watchdog not armed yet")
     assert diag.level == 0
 
@@ -585,8 +601,8 @@ def test_emulator_fault_hooks_are_live_parameters(launch, probe, tmp_path):
     fired = []
     probe.node.create_subscription(LimbActivation, "/frog/limb_activation", fired.append, QOS)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
-    probe.wait_for_subscriber("/frog/primitive")
-    probe.wait_for_topic("/frog/limb_activation")
+    publisher_ready(probe, pub)
+    heard_by(probe, "robot_emulator")
     setter = probe.node.create_client(SetParameters, "/robot_emulator/set_parameters")
     probe.wait_for_service(setter)
 
@@ -685,8 +701,7 @@ def test_emulator_survives_garbage_from_the_host_side(launch, probe, tmp_path):
     emu.wait_for_log("emulated relay on", timeout=30)
     fired = []
     probe.node.create_subscription(LimbActivation, "/frog/limb_activation", fired.append, QOS)
-    probe.wait_for_topic("/frog/limb_activation")
-    probe.spin_for(1.0)                 # the emulator's writer must have matched our reader too
+    heard_by(probe, "robot_emulator")   # the emulator's writer has matched our reader
     fd = os.open(link, os.O_RDWR | os.O_NOCTTY)
     try:
         tty.setraw(fd)
