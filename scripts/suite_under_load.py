@@ -7,7 +7,10 @@ get what a loaded 2-core machine leaves them. The series stops at the first fail
 ``--keep-going``. Each run's output goes to ``OUT/run_K.log``; the summary (one row per run: exit
 code, pytest's result line, wall and CPU time) is printed and written to ``OUT/summary.md``.
 Ctrl-C, SIGTERM (``kill``, ``timeout``) or SIGHUP stop the run under way (SIGINT to its process
-group, as Ctrl-C in a terminal) and the busy processes, and still write the summary.
+group, as Ctrl-C in a terminal; SIGTERM, then SIGKILL, if it is still running STOP_GRACE_S later)
+and the busy processes, and still write the summary. The runs get the default SIGINT action even
+when this script was started with SIGINT ignored (``cmd &`` in a script ignores it, and children
+inherit that), so that the stop reaches pytest.
 
 Examples:
   python scripts/suite_under_load.py                                   # the whole suite, 5 x, 2 busy
@@ -28,6 +31,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 BUSY_LOOP = "while True: pass"
 # "=== 3 passed in 1.2s ===", or with -q "3 passed in 1.2s"
+#: seconds a stopped run gets after SIGINT (pytest's summary), then after SIGTERM, before the next signal
+STOP_GRACE_S = 20.0
 RESULT_LINE = re.compile(r"^=*\s*((\d+ \w+.*|no tests ran.*) in [\d.]+s( \([\d:]+\))?)\s*=*$")
 
 
@@ -59,6 +64,21 @@ def _stop_signal(signum, frame):
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
+def stop_group(p: subprocess.Popen) -> None:
+    """SIGINT to the run's process group (Ctrl-C), then SIGTERM and SIGKILL to what is left."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(p.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            p.wait(STOP_GRACE_S)
+            break
+        except subprocess.TimeoutExpired:
+            print(f"suite_under_load: the run is still going {STOP_GRACE_S:g} s after {sig.name}", file=sys.stderr)
+    p.wait()
+
+
 def run_once(cmd: list[str], log: Path) -> tuple[int, float, float]:
     """Exit code, wall seconds and CPU seconds (user + system, the run and all it waited for)."""
     t0 = time.monotonic()
@@ -69,8 +89,7 @@ def run_once(cmd: list[str], log: Path) -> tuple[int, float, float]:
         try:
             _, status, usage = os.wait4(p.pid, 0)
         except KeyboardInterrupt:
-            os.killpg(p.pid, signal.SIGINT)
-            p.wait()
+            stop_group(p)
             raise
         p.returncode = os.waitstatus_to_exitcode(status)
     return p.returncode, time.monotonic() - t0, usage.ru_utime + usage.ru_stime
@@ -92,6 +111,8 @@ def main(argv=None) -> int:
     rows, failed = [], 0
     for sig in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, _stop_signal)
+    # a handler (not SIG_IGN) is reset to the default in the runs: Ctrl-C and the stop reach pytest
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     busy = start_busy(args.busy)
     try:
         for k in range(1, args.runs + 1):

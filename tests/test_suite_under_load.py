@@ -8,6 +8,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "scripts"))
 import suite_under_load as sul  # noqa: E402
@@ -65,15 +67,25 @@ def _children(pid):
     return out
 
 
-def test_sigterm_stops_the_run_and_the_busy_processes(tmp_path):
+def _ignore_sigint():
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@pytest.mark.parametrize("case", ["plain", "started-with-SIGINT-ignored", "a-test-ignoring-SIGINT"])
+def test_sigterm_stops_the_run_and_the_busy_processes(tmp_path, case):
     """``kill`` (SIGTERM) of the driver mid-run: the run under way is stopped (pytest too, under
-    ./dev's shell), the busy process does not spin on, and the summary is still written."""
+    ./dev's shell), the busy process does not spin on, and the summary is still written. Also when
+    the driver was started with SIGINT ignored (``nohup ... &`` in a script: inherited by every
+    child, so a series' pytest ran on for 5 min after the stop, session 23), and when the run
+    itself ignores SIGINT (then SIGTERM after the grace)."""
     slow = tmp_path / "test_slow.py"
-    slow.write_text("import time\n\ndef test_slow():\n    time.sleep(300)\n")
+    head = "import signal\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\n" if case == "a-test-ignoring-SIGINT" else ""
+    slow.write_text(head + "import time\n\ndef test_slow():\n    time.sleep(300)\n")
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, str(REPO / "scripts" / "suite_under_load.py"), "--runs", "1",
                              "--busy", "1", "--out", str(out), "--", "-n", "0", "-p", "no:cacheprovider", str(slow)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_ignore_sigint if case == "started-with-SIGINT-ignored" else None)
     try:
         end = time.monotonic() + 120
         busy = {}
@@ -83,7 +95,7 @@ def test_sigterm_stops_the_run_and_the_busy_processes(tmp_path):
             time.sleep(0.2)
         assert busy, _children(proc.pid)
         proc.send_signal(signal.SIGTERM)
-        stdout, stderr = proc.communicate(timeout=60)
+        stdout, stderr = proc.communicate(timeout=60 + 2 * sul.STOP_GRACE_S)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -92,6 +104,8 @@ def test_sigterm_stops_the_run_and_the_busy_processes(tmp_path):
     try:
         assert proc.returncode == 1, (stdout, stderr)
         assert "stopped (SIGTERM)" in stderr
+        # the grace is for a run that ignores SIGINT, not for one that only inherited "ignored"
+        assert ("still going" in stderr) == (case == "a-test-ignoring-SIGINT"), stderr
         assert "0 of 0 run(s) passed" in (out / "summary.md").read_text()
         for pid in busy:
             assert not Path(f"/proc/{pid}").exists() or "Z" in Path(f"/proc/{pid}/stat").read_text().split()[2], pid
