@@ -457,8 +457,8 @@ def test_vision_parameters_ranges_live_sets_and_namespaces(launch, probe, tmp_pa
     probe.wait_for_topic("/robot2/frog/odom", timeout=20)
     # kick inputs: the bridge's record of limb firings, under the namespace too
     from soft_robot_interfaces.msg import LimbActivation
-    probe.wait_for_subscriber("/robot2/frog/bridge/sent", timeout=20)
     kick_pub = probe.node.create_publisher(LimbActivation, "/robot2/frog/bridge/sent", 10)
+    probe.wait_matched(kick_pub, timeout=20)      # the graph shows the subscriber before our writer matched it
     kick = LimbActivation(limbs=[0, 1], pulse_duration=0.08)
     kick.header.stamp.sec = 12
     kick_pub.publish(kick)
