@@ -138,58 +138,154 @@ def _cases(args) -> list:
     return cases
 
 
+def run_config(args, kind: str, settings: PlannerSettings, transitions: str, path_settings, start, duration,
+               node_params) -> dict:
+    """What decides one compared run's outcome besides its seed: a resumed comparison reuses a run
+    only if this is the same (as JSON)."""
+    return json.loads(json.dumps({
+        "planner": kind, "settings": settings.as_dict(), "transitions": transitions,
+        "node_params": node_params, "library": str(Path(args.library).resolve()),
+        "real_time_factor": args.real_time_factor,
+        "vision": not args.no_vision, "serial": not args.direct, "duration_s": duration,
+        "path": path_settings.as_dict(), "start_pose": None if start is None else list(start),
+        "twin": {k: getattr(args, k) for k in ("limb_strength_sd", "kick_strength_sd", "yaw_disturbance_sd",
+                                                "yaw_disturbance_tau")}}, default=str))
+
+
+class ResumeMismatch(ValueError):
+    """A run in the output folder was made with other settings than this command's."""
+
+
+def _earlier_result(file: Path, config: dict) -> dict | None:
+    """The run's result from an earlier (interrupted) comparison in the same folder, or None to run it."""
+    if not file.is_file():
+        return None
+    try:
+        result = json.loads(file.read_text())
+    except ValueError:            # written whole by a rename, so only a damaged disk gets here: run it again
+        return None
+    if result.get("config") != config:
+        diff = sorted(k for k in set(config) | set(result.get("config") or {})
+                      if (result.get("config") or {}).get(k) != config.get(k))
+        raise ResumeMismatch(f"{file} was run with other settings ({', '.join(diff)}) than this command's: "
+                             f"resume with the same options, or use another --out")
+    return result
+
+
+def _write_whole(file: Path, data) -> None:
+    file.parent.mkdir(parents=True, exist_ok=True)
+    tmp = file.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data, indent=1, default=float) + "\n")
+    tmp.replace(file)
+
+
+def _plan(args, out: Path) -> list[dict]:
+    """Every compared run, in order (path by path, then planner, then seed), with its settings."""
+    kinds = [k.strip() for k in args.compare_planners.split(",")]
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    plan = []
+    for case in _cases(args):
+        duration = args.duration if case.duration is None else (args.duration or case.duration)
+        for kind in kinds:
+            settings, transitions = planner_settings(kind, args.settings, case.period)
+            for seed in seeds:
+                a = copy.copy(args)
+                a.seed, a.transitions = seed, transitions
+                if kind == "sim-d2":       # beam: the 9 + 81 rollouts of a full tree miss the deadline here
+                    a.node_params = copy.deepcopy(args.node_params)
+                    a.node_params.setdefault("planner_node", {})["beam_width"] = args.compare_beam
+                label = f"{case.name}_{kind}_s{seed}"
+                plan.append({"case": case, "kind": kind, "seed": seed, "args": a, "settings": settings,
+                             "transitions": transitions, "duration": duration, "label": label,
+                             "folder": out / case.name / label,
+                             "config": run_config(a, kind, settings, transitions, case.path_settings,
+                                                  case.start_pose, duration, a.node_params)})
+    return plan
+
+
 def main_compare(args, root: Path) -> int:
+    """Every planner x path x seed as one twin run; the table and the figures.
+
+    Each run's result is kept whole in ``<out>/<path>/<label>/compare_result.json``, so the same
+    command with the same ``--out`` resumes an interrupted comparison (Ctrl-C, SIGTERM) and runs
+    only what is missing; a kept run made with other settings stops the command
+    (:class:`ResumeMismatch`) before anything runs.
+    """
     import time
 
-    from frog_twin.twin import run_twin
+    from frog_twin import twin
     out = args.out or root / "runs" / time.strftime("compare_%Y%m%d_%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     args.out_folder = out
-    kinds = [k.strip() for k in args.compare_planners.split(",")]
-    cases = _cases(args)
-    seeds = list(range(args.seed, args.seed + args.seeds))
-    total, done = len(cases) * len(kinds) * len(seeds), 0
+    plan = _plan(args, out)
+    earlier = [_earlier_result(r["folder"] / RESULT_FILE, r["config"]) for r in plan]
+    if any(earlier):
+        print(f"planner comparison: {sum(map(bool, earlier))} of {len(plan)} runs done earlier in {out}", flush=True)
     results = []
-    for case in cases:
-        name, path_settings, start, period = case.name, case.path_settings, case.start_pose, case.period
-        tracks, points = [], None
-        for kind in kinds:
-            settings, transitions = planner_settings(kind, args.settings, period)
-            for seed in seeds:
-                done += 1
-                a = copy.copy(args)
-                a.seed, a.transitions = seed, transitions
-                if kind == "sim-d2":           # beam: the 9 + 81 rollouts of a full tree miss the deadline here
-                    a.node_params = copy.deepcopy(args.node_params)
-                    a.node_params.setdefault("planner_node", {})["beam_width"] = args.compare_beam
-                label = f"{name}_{kind}_s{seed}"
-                print(f"[{done}/{total}] {label}: depth {settings.depth}, transitions {transitions}, "
-                      f"period {period:.3f} s", flush=True)
-                duration = args.duration if case.duration is None else (args.duration or case.duration)
-                rec, m = run_twin(a, label, out / name / label, path_settings, start, settings, duration)
-                sim_n, fallbacks = _decision_counts(out / name / label)
-                t0 = m["start_time_s"]
-                truth = rec.truth[rec.truth[:, 0] >= t0 - 1e-9]
-                tracks.append((f"{kind} s{seed}", truth[:, 1:3]))
-                points = rec.path if rec.path is not None else points
-                results.append({"path": name, "planner": kind, "seed": seed, "depth": settings.depth,
-                                "transitions": transitions, "mean_distance_m": m["mean_distance_m"],
-                                "max_distance_m": m["max_distance_m"], "finished": bool(m["goal_reached"]),
-                                "completion_time_s": m["completion_time_s"], "simulator_decisions": sim_n,
-                                "fallbacks": fallbacks, "wall_time_s": m["wall_time_s"],
-                                "floor_m": (m.get("feasibility") or {}).get("floor_mean_distance_m", math.nan),
-                                "primitives": m["primitives_used"], "plot": m["plot"]})
+    try:
+        for i, (run, result) in enumerate(zip(plan, earlier), 1):
+            settings, label = run["settings"], run["label"]
+            if result is None:
+                print(f"[{i}/{len(plan)}] {label}: depth {settings.depth}, transitions {run['transitions']}, "
+                      f"period {settings.period:.3f} s", flush=True)
+                case = run["case"]
+                rec, m = twin.run_twin(run["args"], label, run["folder"], case.path_settings, case.start_pose,
+                                       settings, run["duration"])
+                result = _result(run, rec, m)
+                _write_whole(run["folder"] / RESULT_FILE, result)
                 print(f"  mean {m['mean_distance_m'] * 100:.2f} cm, goal {'yes' if m['goal_reached'] else 'no'}"
-                      + (f", {sim_n} simulator decisions, {fallbacks} fallbacks" if transitions == "simulator" else "")
+                      + (f", {result['simulator_decisions']} simulator decisions, {result['fallbacks']} fallbacks"
+                         if run["transitions"] == "simulator" else "")
                       + f", wall {m['wall_time_s']:.0f} s", flush=True)
-                (out / "compare.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
-        if points is not None:
-            plot_path(name, np.asarray(points), tracks, out / f"{name}_compare.png")
-    table = compare_table(results)
+            results.append(result)
+            if i == len(plan) or plan[i]["case"].name != run["case"].name:      # the path's last run
+                _plot_case(run["case"].name, [r for r in results if r["path"] == run["case"].name],
+                           out / f"{run['case'].name}_compare.png")
+    finally:      # also when stopped (Ctrl-C, SIGTERM): the table of what is done, and how to go on
+        _write_summary(args, out, results, len(plan))
+    return 0
+
+
+RESULT_FILE = "compare_result.json"
+
+
+def _plot_case(name: str, results: list[dict], file: Path) -> None:
+    points = next((r["path_points"] for r in results if r["path_points"]), None)
+    if points is not None:
+        plot_path(name, np.asarray(points, dtype=float),
+                  [(f"{r['planner']} s{r['seed']}", np.asarray(r["track"], dtype=float).reshape(-1, 2))
+                   for r in results], file)
+
+
+def _write_summary(args, out: Path, results: list[dict], planned: int) -> None:
+    """compare.json (without the tracks), compare.md and the table on stdout."""
+    brief = [{k: v for k, v in r.items() if k not in ("track", "path_points", "config")} for r in results]
+    (out / "compare.json").write_text(json.dumps(brief, indent=1, default=float) + "\n")
+    table = compare_table(results) if results else "(no run done)"
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    partial = (f"{len(results)} of {planned} runs done: the same command with --out {out} runs the rest"
+               if len(results) < planned else "")
     head = (f"# Planner comparison (twin with vision and the serial link; library {args.library}; "
-            f"real-time factor {args.real_time_factor:g}; seeds {seeds}; sim-d2 beam {args.compare_beam})\n\n")
+            f"real-time factor {args.real_time_factor:g}; seeds {seeds}; sim-d2 beam {args.compare_beam})\n\n"
+            + (partial + "\n\n" if partial else ""))
     (out / "compare.md").write_text(head + table + "\n")
     print()
+    if partial:
+        print(partial)
     print(table)
-    print(f"\ntable, per-path figures, runs: {out}")
-    return 0
+    print(f"\ntable, per-path figures, runs: {out}", flush=True)
+
+
+def _result(run: dict, rec, m: dict) -> dict:
+    """One compared run: its numbers, its settings, its true track and the path (for the figure when resumed)."""
+    sim_n, fallbacks = _decision_counts(run["folder"])
+    truth = rec.truth[rec.truth[:, 0] >= m["start_time_s"] - 1e-9]
+    return {"path": run["case"].name, "planner": run["kind"], "seed": run["seed"], "depth": run["settings"].depth,
+            "transitions": run["transitions"], "config": run["config"], "mean_distance_m": m["mean_distance_m"],
+            "max_distance_m": m["max_distance_m"], "finished": bool(m["goal_reached"]),
+            "completion_time_s": m["completion_time_s"], "simulator_decisions": sim_n,
+            "fallbacks": fallbacks, "wall_time_s": m["wall_time_s"],
+            "floor_m": (m.get("feasibility") or {}).get("floor_mean_distance_m", math.nan),
+            "primitives": m["primitives_used"], "plot": m["plot"],
+            "track": np.round(truth[:, 1:3], 6).tolist(),
+            "path_points": None if rec.path is None else np.round(np.asarray(rec.path)[:, :2], 6).tolist()}

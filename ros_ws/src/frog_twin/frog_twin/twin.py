@@ -603,7 +603,8 @@ def _main(argv=None) -> int:
     cg = ap.add_argument_group("planner comparison (issue 19)")
     cg.add_argument("--planner-compare", action="store_true",
                     help="run the paper's planner, the project's, and the simulator in the loop at depth 1 and 2 "
-                         "on each path with --seeds seeds; one table (compare.md) and one figure per path")
+                         "on each path with --seeds seeds; one table (compare.md) and one figure per path; "
+                         "stopped (Ctrl-C, SIGTERM), the same command with the same --out resumes it")
     cg.add_argument("--compare-planners", default="paper,project,sim-d1,sim-d2",
                     help="planners compared (comma-separated of paper, project, sim-d1, sim-d2, sim-paper: the "
                          "paper's cost on the simulator's predictions)")
@@ -792,7 +793,7 @@ def _main(argv=None) -> int:
         from frog_twin.campaign import main_campaign
         return main_campaign(args, root)
     if args.planner_compare:
-        from frog_twin.planner_compare import PLANNERS, main_compare
+        from frog_twin.planner_compare import PLANNERS, ResumeMismatch, main_compare
         bad = [k for k in args.compare_planners.split(",") if k.strip() not in PLANNERS]
         bad_paths = [p for p in args.compare_paths.split(",") if p not in (*PATH_NAMES, "all", "none")]
         if bad_paths:
@@ -800,7 +801,11 @@ def _main(argv=None) -> int:
         if bad or (args.compare_runs is not None and not args.compare_runs.is_dir()):
             ap.error(f"--compare-planners {', '.join(bad)}: expected of {', '.join(PLANNERS)}" if bad
                      else f"--compare-runs {args.compare_runs} is not a folder")
-        return main_compare(args, root)
+        try:
+            return main_compare(args, root)
+        except ResumeMismatch as exc:
+            print(f"frog-twin: error: {exc}", file=sys.stderr)
+            return 2
     out = args.out or root / "runs" / time.strftime("main_%Y%m%d_%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     names = PATH_NAMES if args.path == "all" else (args.path,)

@@ -1,5 +1,6 @@
 """frog-twin --planner-compare's table and planner settings, on made-up results (no ROS)."""
 
+import json
 import re
 
 import numpy as np
@@ -58,3 +59,83 @@ def test_compared_planners_share_the_period_and_differ_as_specified():
         assert t == "simulator" and s.depth == depth and s.w_distance == base.w_distance
     sim_paper, t = planner_settings("sim-paper", base, 1.43)
     assert t == "simulator" and sim_paper == paper        # the paper's cost, only the predictions differ
+
+
+# --- resuming an interrupted comparison (frog-twin --planner-compare, runs faked: no ROS) ---
+
+def _fake_twin(monkeypatch, calls, stop_at=None):
+    """run_twin replaced: a run's numbers and track follow from its label alone."""
+    import zlib
+    from types import SimpleNamespace
+
+    import frog_twin.twin as twin
+
+    def run_twin(args, label, out, path_settings, start, settings, duration):
+        calls.append(label)
+        if len(calls) == stop_at:
+            raise KeyboardInterrupt("SIGTERM")           # the twin's stop-signal handler
+        r = np.random.default_rng(zlib.crc32(label.encode()))
+        t = np.arange(0.0, 5.0, 0.5)
+        truth = np.column_stack([t, r.normal(size=len(t)), r.normal(size=len(t))])
+        rec = SimpleNamespace(truth=truth, path=np.column_stack([np.linspace(0, 1, 5), np.zeros(5)]))
+        m = {"mean_distance_m": float(r.uniform(0.002, 0.02)), "max_distance_m": 0.03, "goal_reached": True,
+             "completion_time_s": 4.0, "wall_time_s": 1.0, "primitives_used": {"C": 3}, "plot": label + ".png",
+             "start_time_s": 1.0, "feasibility": {"floor_mean_distance_m": 0.001}}
+        return rec, m
+    monkeypatch.setattr(twin, "run_twin", run_twin)
+
+
+def _compare(tmp_path, out, *extra):
+    import frog_twin.twin as twin
+    lib = tmp_path / "lib.npz"
+    lib.touch()
+    return twin.main(["--planner-compare", "--compare-paths", "line,sine", "--compare-planners", "paper,project",
+                      "--library", str(lib), "--out", str(out), *extra])
+
+
+def test_a_stopped_comparison_resumes_to_the_same_table(tmp_path, monkeypatch, capsys):
+    whole = []
+    _fake_twin(monkeypatch, whole)
+    assert _compare(tmp_path, tmp_path / "whole") == 0
+    assert len(whole) == 4
+    calls = []
+    _fake_twin(monkeypatch, calls, stop_at=3)
+    assert _compare(tmp_path, tmp_path / "part") == 130
+    assert "2 of 4 runs done: the same command with --out" in (tmp_path / "part" / "compare.md").read_text()
+    assert (tmp_path / "part" / "line_compare.png").is_file() and not (tmp_path / "part" / "sine_compare.png").exists()
+    capsys.readouterr()
+    calls.clear()
+    _fake_twin(monkeypatch, calls)
+    assert _compare(tmp_path, tmp_path / "part") == 0
+    assert calls == whole[2:]                         # only what was missing
+    assert "2 of 4 runs done earlier" in capsys.readouterr().out
+    part, full = ((tmp_path / d / "compare.md").read_text() for d in ("part", "whole"))
+    assert part.split("\n", 1)[1] == full.split("\n", 1)[1] and "runs done" not in part
+    assert json.loads((tmp_path / "part" / "compare.json").read_text()) == \
+        json.loads((tmp_path / "whole" / "compare.json").read_text())
+    assert (tmp_path / "part" / "sine_compare.png").is_file()
+
+
+def test_a_resume_with_other_settings_is_refused_before_any_run(tmp_path, monkeypatch, capsys):
+    calls = []
+    _fake_twin(monkeypatch, calls, stop_at=3)
+    assert _compare(tmp_path, tmp_path / "c") == 130          # line_paper_s1 and line_project_s1 done
+    calls.clear()
+    _fake_twin(monkeypatch, calls)
+    assert _compare(tmp_path, tmp_path / "c", "--real-time-factor", "0.5") == 2
+    assert calls == []
+    err = capsys.readouterr().err
+    assert "line_paper_s1" in err and "other settings (real_time_factor)" in err and "another --out" in err
+    assert _compare(tmp_path, tmp_path / "c", "--w-distance", "7000") == 2      # the project planner's cost
+    err = capsys.readouterr().err
+    assert "line_project_s1" in err and "other settings (settings)" in err and calls == []
+
+
+def test_a_damaged_result_is_run_again(tmp_path, monkeypatch):
+    calls = []
+    _fake_twin(monkeypatch, calls)
+    assert _compare(tmp_path, tmp_path / "c") == 0
+    (tmp_path / "c" / "sine" / "sine_paper_s1" / "compare_result.json").write_text('{"path": "si')
+    calls.clear()
+    assert _compare(tmp_path, tmp_path / "c") == 0
+    assert calls == ["sine_paper_s1"]
