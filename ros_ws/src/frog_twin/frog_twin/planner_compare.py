@@ -90,7 +90,8 @@ def compare_table(results: list[dict]) -> str:
             best_sim = min(sim, key=lambda k: sum(cell[k, p][0] for p in paths))
             worse = [p for p in paths if cell[best_sim, p][0] > cell["project", p][0]]
             lines.append(f"Best simulator mode {best_sim} against the library mode (project): worse on "
-                         f"{', '.join(worse) if worse else 'no path'} (target: none).")
+                         f"{', '.join(_with_error(results, best_sim, 'project', p) for p in worse) or 'no path'} "
+                         f"(target: none).")
     if "paper" in kinds:
         others = [k for k in kinds if k != "paper"]
         best = min(others, key=lambda k: sums[k]) if others else None
@@ -99,8 +100,28 @@ def compare_table(results: list[dict]) -> str:
             worse = [p for p in paths if cell[best, p][0] > cell["paper", p][0]]
             lines.append(f"Best mode {best}: sum {sums[best] * 100:.2f} cm = {ratio:.2f} x the paper planner's "
                          f"{sums['paper'] * 100:.2f} cm (target <= 0.70: {'met' if ratio <= 0.7 else 'NOT met'}); "
-                         f"paths worse than the paper planner: {', '.join(worse) if worse else 'none'}.")
+                         f"paths worse than the paper planner: "
+                         f"{', '.join(_with_error(results, best, 'paper', p) for p in worse) or 'none'}.")
+    if any(len(_means(results, k, p)) > 1 for k in kinds for p in paths):
+        lines.append("Worse by: the difference of the seed means, +- its standard error from the spread of the "
+                     "seeds (sqrt(s1^2/n1 + s2^2/n2)); a difference within about 2 standard errors is within "
+                     "the seeds' noise.")
     return "\n".join(lines)
+
+
+def _means(results, kind: str, path: str) -> list[float]:
+    return [r["mean_distance_m"] for r in results if r["planner"] == kind and r["path"] == path]
+
+
+def _with_error(results, kind: str, other: str, path: str) -> str:
+    """'sine (+0.11 +- 0.42 cm)': how much worse ``kind`` is than ``other`` on ``path``, and the
+    standard error of that difference from the seeds' spread (none with one seed each)."""
+    a, b = np.array(_means(results, kind, path)), np.array(_means(results, other, path))
+    diff = (a.mean() - b.mean()) * 100
+    if len(a) < 2 or len(b) < 2:
+        return f"{path} (+{diff:.2f} cm)"
+    se = math.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b)) * 100
+    return f"{path} (+{diff:.2f} +- {se:.2f} cm)"
 
 
 def plot_path(path_name: str, path_points, tracks: list[tuple[str, np.ndarray]], file: Path) -> None:

@@ -31,12 +31,24 @@ def test_table_sums_the_seed_means_and_judges_the_targets():
     assert f"Best mode {best}" in text and f"{ratio:.2f} x the paper" in text
     assert ("met" if ratio <= 0.7 else "NOT met") in text
     worse = [p for p in ("line", "sine") if means[p, best].mean() > means[p, "paper"].mean()]
-    assert f"worse than the paper planner: {', '.join(worse) if worse else 'none'}" in text
+    listed = re.search(r"worse than the paper planner: (.*)\.", text).group(1)
+    assert [w.split(" (")[0] for w in listed.split(", ")] == (worse or ["none"])
     assert "sim-d1 20 / 4" in text           # 2 paths x 2 seeds x (5 decisions, 1 fallback)
     assert "Decisions made within the period: 83.3 % (target >= 99 %: NOT met)" in text
     worse_sim = [p for p in ("line", "sine") if means[p, "sim-d1"].mean() > means[p, "project"].mean()]
-    assert f"against the library mode (project): worse on {', '.join(worse_sim) or 'no path'}" in text
+    listed = re.search(r"against the library mode \(project\): worse on (.*) \(target", text).group(1)
+    assert [w.split(" (")[0] for w in listed.split(", ")] == (worse_sim or ["no path"])
     assert "(2/2)" in text
+
+
+def test_worse_paths_carry_the_difference_and_its_standard_error():
+    # sim-d1 worse than the project on the sine by 0.2 cm; seeds spread: project 1, 2, 3 mm; sim-d1 2, 4, 6 mm
+    results = [_result("sine", "project", s, v) for s, v in ((1, 0.001), (2, 0.002), (3, 0.003))]
+    results += [_result("sine", "sim-d1", s, v, sim=5) for s, v in ((1, 0.002), (2, 0.004), (3, 0.006))]
+    # sample variances 1e-6 and 4e-6 m^2 over 3 seeds each: s.e. sqrt(5e-6 / 3) = 1.29 mm
+    assert "worse on sine (+0.20 +- 0.13 cm)" in compare_table(results)
+    one_seed = compare_table([r for r in results if r["seed"] == 1])
+    assert "worse on sine (+0.10 cm)" in one_seed and "standard error" not in one_seed
 
 
 def test_floor_is_the_lowest_of_the_planners_models():
