@@ -16,6 +16,7 @@ import time
 import traceback
 from pathlib import Path
 
+from frog_common.atomic_files import atomic_write_text
 from frog_twin.core.faults import CAMPAIGN_FAULTS, CAMPAIGN_MOMENTS, FAULT_CLASSES, campaign_plan, parse_faults
 
 #: the paths' nominal times [s simulated] on the twin (main job, issue 18 model), for the moments
@@ -108,11 +109,7 @@ def _run_one(args, run_path, out: Path, label: str, path: str, seed: int, faults
     print(f"    -> {rep['outcome']}" + (f" ({rep['stop_reason']})" if rep.get("stop_reason") else "")
           + f"; stale firings {len(rep['stale_firings'])}, recorder lost {rep['recorder_lost']}", flush=True)
     # written whole (a rename): an interrupted campaign resumes from these files (same --out)
-    f = _result_file(out, label)
-    f.parent.mkdir(parents=True, exist_ok=True)
-    tmp = f.with_suffix(".tmp")
-    tmp.write_text(json.dumps(rep, indent=1, default=float) + "\n")
-    tmp.replace(f)
+    atomic_write_text(_result_file(out, label), json.dumps(rep, indent=1, default=float) + "\n")
 
 
 def _kind(fault_label: str) -> str:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from frog_common.atomic_files import atomic_write_text
 from frog_planner.core.settings import PlannerSettings
 
 PLANNERS = ("paper", "project", "sim-d1", "sim-d2", "sim-paper")
@@ -193,13 +194,6 @@ def _earlier_result(file: Path, config: dict) -> dict | None:
     return result
 
 
-def _write_whole(file: Path, data) -> None:
-    file.parent.mkdir(parents=True, exist_ok=True)
-    tmp = file.with_suffix(".tmp")
-    tmp.write_text(json.dumps(data, indent=1, default=float) + "\n")
-    tmp.replace(file)
-
-
 def _plan(args, out: Path) -> list[dict]:
     """Every compared run, in order (path by path, then planner, then seed), with its settings."""
     kinds = [k.strip() for k in args.compare_planners.split(",")]
@@ -253,7 +247,7 @@ def main_compare(args, root: Path) -> int:
                 rec, m = twin.run_twin(run["args"], label, run["folder"], case.path_settings, case.start_pose,
                                        settings, run["duration"])
                 result = _result(run, rec, m)
-                _write_whole(run["folder"] / RESULT_FILE, result)
+                atomic_write_text(run["folder"] / RESULT_FILE, json.dumps(result, indent=1, default=float) + "\n")
                 print(f"  mean {m['mean_distance_m'] * 100:.2f} cm, goal {'yes' if m['goal_reached'] else 'no'}"
                       + (f", {result['simulator_decisions']} simulator decisions, {result['fallbacks']} fallbacks"
                          if run["transitions"] == "simulator" else "")
