@@ -7,7 +7,7 @@ import pytest
 
 from frog_twin.core.faults import (
     CAMPAIGN_FAULTS, FAULT_CLASSES, Fault, FaultSpecError, Observed, campaign_plan, check_against_graph,
-    content_time, outcome, parse_faults, recorder_losses, recovery_time, restart_windows, stale_firings)
+    content_time, fault_end, fault_report, outcome, parse_faults, recorder_losses, recovery_time, restart_windows, stale_firings)
 
 
 def test_spec_round_trips_through_labels_and_sorts_by_time():
@@ -115,6 +115,53 @@ def test_odometry_another_subscriber_saw_counts_and_only_what_existed():
     # what the witness saw of a frozen camera is still the frame at the freeze's start
     frozen = [Fault("camera_freeze", 5.0, 10.0)]
     assert stale_firings(gap, frozen, 3.0, 0.7, witness_odom=fresh.odom) == stale_firings(fresh, frozen, 3.0, 0.7)
+
+
+class _Watch:
+    """The parts of the twin's watch node that fault_report reads, with nothing lost or blind."""
+
+    def __init__(self, obs):
+        self.obs, self.seen, self.recorder_up = obs, {}, []
+
+    def planner_blind(self):
+        return []
+
+    def odom_blind(self, witness_odom=()):
+        return []
+
+    def discovery_gaps(self):
+        return {}
+
+
+class _Injector:
+    def __init__(self, done):
+        self.done = done
+
+    def failures(self):
+        return []
+
+
+def test_a_fault_timed_by_its_node_ends_its_duration_after_it_started():
+    # campaign23 occlude@3.1+4 (line, seed 1), planner started at 3.02 s: the injector's one action
+    # covered the tag at 6.24 s, camera_sim's occluder took it away 4 s later, the tracker had the
+    # tag again at 10.29 s, the planner said "odometry is stale" at 10.01 s and followed at 11.44 s
+    start = 3.02
+    status = [(2.86, 0)] + [(t, 1) for t in (4.29, 5.72, 7.15, 8.58)] + [(10.01, 3)] + [
+        (t, 1) for t in (11.44, 12.87, 14.3)]
+    obs = Observed(odom=[2.9 + 0.04 * i for i in range(98)] + [10.29 + 0.04 * i for i in range(100)],
+                   status=status)
+    f = Fault("occlude", 3.1, 4.0)
+    report = fault_report([f], _Watch(obs), start, _Injector([(6.24, 0.0, f.label() + ": tag covered")]),
+                          {}, 3.56, 0.7, True, None, [])
+    assert report["per_fault"][0]["end_s"] == pytest.approx(6.24 + 4.0 - start)
+    assert report["per_fault"][0]["recovery_s"] == pytest.approx(11.44 - 10.24)   # not 5.2 s from the cover
+    # a fault its injector undoes ended when the undo ran; one with nothing run, at its nominal end
+    freeze = Fault("camera_freeze", 3.1, 5.0)
+    assert fault_end(freeze, 8.12, [6.2, 11.25]) == 11.25
+    assert fault_end(freeze, 8.12, []) == 8.12
+    assert fault_end(Fault("kill", 3.1, target="planner_node"), 6.12, [6.2]) == 6.2
+    # wall-timed: a SIGSTOP whose SIGCONT never ran (the run ended) has only its start
+    assert fault_end(Fault("sigstop", 3.1, 4.0, target="tracker_node"), 6.12, [6.2]) == 6.2
 
 
 def test_recovery_time_and_outcome():

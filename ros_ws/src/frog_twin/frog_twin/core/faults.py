@@ -355,6 +355,21 @@ def outcome(goal: bool, stop_reason, stale: int, lost: int, unclean) -> str:
     return "stopped" if stop_reason else "failed"
 
 
+def fault_end(fault: Fault, nominal_end: float, ran: list) -> float:
+    """When a fault ended, in the run's simulated clock, from the times its injector actions ran.
+
+    A fault undone by an action (a camera live again, a SIGCONT, a clock running again) ended
+    when that action ran, which for wall-timed faults is the only measure. A fault that one
+    action starts and a node times itself (camera_sim's occluder, for ``duration`` simulated
+    s) ended ``duration`` after that action. Nothing ran (the run ended first): its nominal end.
+    """
+    if not ran:
+        return nominal_end
+    if len(ran) == 1 and fault.duration and fault.kind not in WALL_DURATION:
+        return ran[0] + fault.duration
+    return max(ran)
+
+
 def fault_report(faults, observer, sim_start: float, injector, recorded: dict, pose_bound: float,
                  command_bound: float, goal: bool, stop_reason, unclean, recorded_odom=(),
                  recorded_decisions=(), recorded_pose_ages=()) -> dict:
@@ -376,9 +391,8 @@ def fault_report(faults, observer, sim_start: float, injector, recorded: dict, p
     lost = sum(v["lost"] for v in losses.values())
     per_fault = []
     for f, g in zip(faults, shifted):
-        # the end of a wall-timed fault is when its undo action ran
-        ends = [t for t, _, what in injector.done if what.startswith(f.label() + ":")]
-        t_end = max(ends) if ends else g.end
+        ran = [t for t, _, what in injector.done if what.startswith(f.label() + ":")]
+        t_end = fault_end(f, g.end, ran)
         rec = None if f.kind == "emergency" else recovery_time(obs.status, g.at, t_end, pose_bound + 2.0)
         per_fault.append({"fault": f.label(), "end_s": t_end - sim_start, "recovery_s": rec})
     return {"outcome": outcome(goal, stop_reason, len(stale), lost, unclean),
