@@ -7,7 +7,8 @@ import pytest
 
 from frog_twin.core.faults import (
     CAMPAIGN_FAULTS, FAULT_CLASSES, Fault, FaultSpecError, Observed, campaign_plan, check_against_graph,
-    content_time, fault_end, fault_report, outcome, parse_faults, recorder_losses, recovery_time, restart_windows, stale_firings)
+    content_time, fault_end, fault_report, outcome, parse_faults, recorder_losses, recovery_time, restart_windows,
+    stale_firings)
 
 
 def test_spec_round_trips_through_labels_and_sorts_by_time():
