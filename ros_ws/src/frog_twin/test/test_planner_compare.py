@@ -51,6 +51,19 @@ def test_worse_paths_carry_the_difference_and_its_standard_error():
     assert "worse on sine (+0.10 cm)" in one_seed and "standard error" not in one_seed
 
 
+def test_a_stopped_comparison_sums_only_the_paths_every_planner_has_run():
+    # stopped during sin1: the paper planner has one seed there, the others none
+    results = [_result(p, k, s, v) for p, k, s, v in (
+        ("line", "paper", 1, 0.004), ("line", "project", 1, 0.002), ("sine", "paper", 1, 0.010),
+        ("sine", "project", 1, 0.008), ("sin1", "paper", 1, 0.025))]
+    text = compare_table(results)
+    row = next(line for line in text.splitlines() if line.startswith("| **sum"))
+    assert "2 paths" in row and re.findall(r"\*\*([\d.]+)\*\*", row) == ["1.40", "1.00"]
+    assert "nan" not in text.split("| sin1 |")[0] + text.split("| **sum")[1]
+    assert "= 0.71 x the paper planner's 1.40 cm (target <= 0.70: NOT met); paths worse than the paper planner: none" \
+        in text
+
+
 def test_floor_is_the_lowest_of_the_planners_models():
     # the project's model turns less tightly (higher floor) than the paper's; the project ran first
     results = [_result("sine", "project", 1, 0.008, floor=0.0062), _result("sine", "paper", 1, 0.010, floor=0.0035),
