@@ -99,7 +99,7 @@ def compare_table(results: list[dict]) -> str:
     if "paper" in kinds:
         others = [k for k in kinds if k != "paper"]
         best = min(others, key=lambda k: sums[k]) if others else None
-        if best is not None:
+        if best is not None and done:      # nothing to compare before one path is done by all
             ratio = sums[best] / sums["paper"]
             worse = [p for p in done if cell[best, p][0] > cell["paper", p][0]]
             lines.append(f"Best mode {best}: sum {sums[best] * 100:.2f} cm = {ratio:.2f} x the paper planner's "

@@ -62,6 +62,8 @@ def test_a_stopped_comparison_sums_only_the_paths_every_planner_has_run():
     assert "nan" not in text.split("| sin1 |")[0] + text.split("| **sum")[1]
     assert "= 0.71 x the paper planner's 1.40 cm (target <= 0.70: NOT met); paths worse than the paper planner: none" \
         in text
+    first = compare_table(results[:2] + [_result("line", "paper", 2, 0.005)])    # stopped in the first path
+    assert "sum of the 0 paths" in first and "Best mode" not in first
 
 
 def test_floor_is_the_lowest_of_the_planners_models():
