@@ -40,8 +40,10 @@ def _render(folder, y_of_t, duration, x=0.0):
 
 @pytest.fixture(scope="module")
 def video(tmp_path_factory):
-    # the line path's start (frog-twin places it at x 0, y -0.233, heading +y); slow swim along it
-    return _render(tmp_path_factory.mktemp("video"), lambda t: -0.233 + 0.004 * t, 45.0)
+    # the line path's start (frog-twin places it at x 0, y -0.233, heading +y); slow swim along it.
+    # 90 s: a tracker stopped twice, then wedged once after its restart, is back about 60 s after
+    # the camera started on a loaded machine (45 s ran out before its third restart, 2026-12-05)
+    return _render(tmp_path_factory.mktemp("video"), lambda t: -0.233 + 0.004 * t, 90.0)
 
 
 def _frog_twin(args, env, timeout):

@@ -56,8 +56,9 @@ def test_two_frogs_in_two_namespaces_do_not_cross_talk(launch, probe, library):
         probe.wait_for_node(f"{ns}/planner_node", timeout=120)
 
     def following():
-        return all(any(s.state == PlannerStatus.STATE_FOLLOWING for s in status[ns]) for ns in offsets)
-    probe.spin_until(following, 60, "both planners following")
+        # and the probe has heard each simulator: its subscriptions may match after the planners' did
+        return all(odom[ns] and any(s.state == PlannerStatus.STATE_FOLLOWING for s in status[ns]) for ns in offsets)
+    probe.spin_until(following, 60, "both planners following and both simulators heard")
     for ns, y in offsets.items():
         # one simulator and one planner behind each namespaced topic, nothing in the root namespace
         assert probe.node.count_publishers(f"{ns}/frog/sim/odom") == 1
