@@ -186,8 +186,14 @@ def query(probe, fq: str, tmp: str) -> dict:
     return {"name": name, "params": params, **current}
 
 
-def collect(names: list[str]) -> dict[str, str]:
-    """Start ``names``, query each, stop them; node -> Markdown block."""
+def collect(names: list[str], expected: dict[str, str | None] | None = None) -> dict[str, str]:
+    """Start ``names``, query each, stop them; node -> Markdown block.
+
+    With ``expected`` (the README blocks, for --check), a node whose block differs is asked
+    again for up to 60 s before its answer is kept: under load a node's publishers can reach the
+    graph seconds after its subscriptions, and a node at its defaults only gains endpoints, so a
+    real difference persists and is still reported.
+    """
     import rclpy
     from soft_robot_common.processes import NodeProcess, acquire_domain, ros_args
 
@@ -214,7 +220,10 @@ def collect(names: list[str]) -> dict[str, str]:
                     if time.monotonic() > deadline:
                         raise RuntimeError(f"{n} did not join the graph within 120 s")
                     rclpy.spin_once(probe, timeout_sec=0.2)
+                again = time.monotonic() + 60
                 out[n] = block(query(probe, "/" + n, tmp))
+                while expected and out[n] != expected.get(n) and time.monotonic() < again:
+                    out[n] = block(query(probe, "/" + n, tmp))
                 print(f"  {n}", file=sys.stderr)
         finally:
             probe.destroy_node()
@@ -248,7 +257,9 @@ def main(argv=None) -> int:
     if unknown:
         ap.error(f"unknown node(s) {', '.join(unknown)}; known: {', '.join(NODES)}")
     names = args.nodes or list(NODES)
-    blocks = collect(names)
+    expected = {n: current_block(readme(n).read_text(), n) if readme(n).exists() else None
+                for n in names} if args.check else None
+    blocks = collect(names, expected)
     if args.print:
         print("\n\n".join(blocks.values()))
         return 0

@@ -32,7 +32,7 @@ def test_check_names_a_stale_block(tmp_path, monkeypatch):
     good = "#### `sim_node`\n\n| parameter | type | default | range | live | description |"
     readme.write_text(f"{ref.BEGIN.format('sim_node')}\nold text\n{ref.END}\n")
     monkeypatch.setattr(ref, "readme", lambda node: readme)
-    monkeypatch.setattr(ref, "collect", lambda names: {n: good for n in names})
+    monkeypatch.setattr(ref, "collect", lambda names, expected=None: {n: good for n in names})
     monkeypatch.setattr(ref, "REPO", tmp_path)
     assert ref.main(["--check", "sim_node"]) == 1
     assert ref.main(["--write", "sim_node"]) == 0
