@@ -87,6 +87,18 @@ def first_messages(proc: subprocess.Popen, timeout: float) -> tuple[dict, int]:
     return got, ticks
 
 
+def isolated_domain(transports: str | None):
+    """(a free ROS domain, the environment for it) with Fast DDS's ``transports`` (None: its default)."""
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "ros_ws", "src", "soft_robot_common"))
+    from soft_robot_common.processes import acquire_domain
+    domain = acquire_domain()
+    env = dict(domain.env)
+    env.pop("FASTDDS_BUILTIN_TRANSPORTS", None)
+    if transports:
+        env["FASTDDS_BUILTIN_TRANSPORTS"] = transports
+    return domain, env
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cycles", type=int, default=20, help="restarts of the subscriber (default 20)")
@@ -100,13 +112,7 @@ def main(argv=None) -> int:
         return 0
     if args.cycles < 1 or args.busy < 0 or not args.timeout > 0:
         ap.error("--cycles must be >= 1, --busy >= 0 and --timeout > 0")
-    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "ros_ws", "src", "soft_robot_common"))
-    from soft_robot_common.processes import acquire_domain
-    domain = acquire_domain()
-    env = dict(domain.env)
-    env.pop("FASTDDS_BUILTIN_TRANSPORTS", None)
-    if args.transports:
-        env["FASTDDS_BUILTIN_TRANSPORTS"] = args.transports
+    domain, env = isolated_domain(args.transports)
     me = [sys.executable, os.path.abspath(__file__), "--role"]
     busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
     pub = subprocess.Popen(me + ["pub"], env=env)

@@ -72,13 +72,9 @@ def main(argv=None) -> int:
         return 0
     if not (args.duration > args.period > 0 and args.busy >= 0 and args.slow > 0):
         ap.error("need --duration > --period > 0, --busy >= 0 and --slow > 0")
-    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "ros_ws", "src", "soft_robot_common"))
-    from soft_robot_common.processes import acquire_domain
-    domain = acquire_domain()
-    env = dict(domain.env)
-    env.pop("FASTDDS_BUILTIN_TRANSPORTS", None)
-    if args.transports:
-        env["FASTDDS_BUILTIN_TRANSPORTS"] = args.transports
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from dds_restart_repro import isolated_domain
+    domain, env = isolated_domain(args.transports)
     me = [sys.executable, os.path.abspath(__file__)]
     busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
     out = subprocess.Popen(me + ["--role", "writer", "--duration", str(args.duration)], env=env,
