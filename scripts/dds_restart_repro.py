@@ -44,9 +44,10 @@ def publisher() -> None:
         info_pub.publish(CameraInfo(header=image.header, width=640, height=480))
         image_pub.publish(image)
     node.create_timer(1 / 18, tick)
+    from rclpy.executors import ExternalShutdownException
     try:
         rclpy.spin(node)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ExternalShutdownException):     # the driver's SIGTERM at the end
         pass
 
 
