@@ -53,7 +53,8 @@ def pytest_runtest_makereport(item, call):
 def ros_domain(monkeypatch):
     """An exclusive ROS domain id; the test process's own environment is switched to it."""
     domain = acquire_domain()
-    for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_PYTHON_CHECK_FIELDS"):
+    for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_PYTHON_CHECK_FIELDS",
+                "FASTDDS_BUILTIN_TRANSPORTS"):
         monkeypatch.setenv(key, domain.env[key])
     monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
     yield domain

@@ -25,6 +25,11 @@ from typing import Callable, Optional
 PARENT_PID_ENV = "SOFT_ROBOT_PARENT_PID"
 DOMAIN_RANGE = range(120, 230)   # Fast DDS ports overflow above domain 232
 LOCK_DIR = Path("/tmp/soft_robot_test_domains")
+#: Fast DDS transports of every node we start: UDP only. With the shared-memory transport (the
+#: default) a writer's publish() blocked for ~1 s after a reader's process was SIGKILLed
+#: (scripts/dds_writer_block_repro.py: 9 of 355 s; UDPv4 0 of 357 s), once for good in the
+#: fault tests (docs/faults.md, "The whole suite under load").
+FASTDDS_TRANSPORTS = "UDPv4"
 
 
 @dataclass
@@ -42,7 +47,7 @@ class RosDomain:
 
 
 def acquire_domain(base_env: Optional[dict] = None) -> RosDomain:
-    """Pick a domain id no other run on this machine holds (lock files); localhost discovery."""
+    """Pick a domain id no other run on this machine holds (lock files); localhost discovery, UDP."""
     LOCK_DIR.mkdir(exist_ok=True)
     start = (os.getpid() * 7919 + time.monotonic_ns()) % len(DOMAIN_RANGE)
     for i in range(len(DOMAIN_RANGE)):
@@ -56,7 +61,7 @@ def acquire_domain(base_env: Optional[dict] = None) -> RosDomain:
         env = dict(os.environ if base_env is None else base_env)
         env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                    ROS_PYTHON_CHECK_FIELDS="1", PYTHONUNBUFFERED="1",
-                   RCUTILS_COLORIZED_OUTPUT="0")
+                   RCUTILS_COLORIZED_OUTPUT="0", FASTDDS_BUILTIN_TRANSPORTS=FASTDDS_TRANSPORTS)
         env.pop("ROS_LOCALHOST_ONLY", None)  # deprecated in Jazzy; conflicts with the range
         return RosDomain(domain, env, f)
     raise RuntimeError(f"no free ROS domain id in {DOMAIN_RANGE}")

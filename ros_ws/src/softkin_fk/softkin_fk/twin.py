@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 from soft_robot_common.graph import load_graph
-from soft_robot_common.processes import acquire_domain
+from soft_robot_common.processes import FASTDDS_TRANSPORTS, acquire_domain
 
 MM = 1e-3
 #: The finger's node graph (package data; also installed as share/softkin_fk/config/finger_graph.yaml).
@@ -324,7 +324,8 @@ def main(argv=None) -> int:
     if args.domain is not None:
         domain = None
         env = dict(os.environ, ROS_DOMAIN_ID=str(args.domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-                   PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
+                   PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0",
+                   FASTDDS_BUILTIN_TRANSPORTS=FASTDDS_TRANSPORTS)
         env.pop("ROS_LOCALHOST_ONLY", None)
     else:
         domain = acquire_domain()     # held exclusively until the end of the run
