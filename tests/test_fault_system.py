@@ -253,3 +253,53 @@ def test_a_deaf_tracker_is_killed_and_restarted_and_the_frog_completes_the_path(
     if not m["goal_reached"]:     # only when every restart after the deaf kill met that wedge
         assert len(later) == 2 and m["stop_reason"].startswith("tracker_node exited (SIGKILL; 3 restart(s) used)"), \
             (m["stop_reason"], log.read_text()[-3000:])
+
+
+def test_a_stalled_world_stops_the_run_with_that_reason(small_library, tmp_path):
+    """A simulator that stops stepping without a fault pausing it (seen once: sim_node blocked for good
+    in the middleware's publish, docs/faults.md; here SIGSTOPped from outside the injector): /clock stops
+    for every node, and the twin stops the run after --world-stall-after with that reason, instead of
+    taking the vision nodes that starve of /clock for hung. SIGCONT once the twin says it stops, so
+    every node can end cleanly."""
+    import os
+    import signal
+    import time
+    out, log = tmp_path / "twin", tmp_path / "twin.log"
+    with open(log, "w") as f:
+        p = subprocess.Popen([sys.executable, "-m", "frog_twin.twin", "--library", str(small_library), "--path",
+                              "ellipse", "--duration", "90", "--seed", "3", "--world-stall-after", "4",
+                              "--out", str(out)], stdout=f, stderr=subprocess.STDOUT, text=True)
+    sim = None
+    try:
+        deadline = time.monotonic() + 180
+        while "following" not in log.read_text() and p.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert "following" in log.read_text(), log.read_text()[-3000:]
+        time.sleep(3.0)                                     # the frog under way
+        sim = [pid for pid in _started_by(p.pid) if b"sim_node" in Path(f"/proc/{pid}/cmdline").read_bytes()]
+        assert len(sim) == 1, sim
+        os.kill(sim[0], signal.SIGSTOP)
+        t_stop = time.monotonic()
+        deadline = t_stop + 60
+        while "stopping:" not in log.read_text() and p.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        t_said = time.monotonic()
+        os.kill(sim[0], signal.SIGCONT)
+        assert p.wait(timeout=300) == 0, log.read_text()[-4000:]
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+        for pid in sim or ():
+            try:
+                os.kill(pid, signal.SIGCONT)
+            except ProcessLookupError:
+                pass
+    (m,) = json.loads((out / "metrics.json").read_text())
+    assert not m["goal_reached"]
+    assert m["stop_reason"].startswith("the simulated world stalled: /clock has not advanced for"), m["stop_reason"]
+    # /clock's last message came up to one of sim_node's steps before the SIGSTOP: not before the bound
+    assert 4.0 - 0.5 <= t_said - t_stop < 4.0 + 5.0, (t_said - t_stop, log.read_text()[-2000:])
+    events = m["supervision"]["events"]
+    assert not [e for e in events if e["what"] in ("hung", "exited", "restarted")], events    # no restart spent
+    assert m["unclean_stops"] == [], m["supervision"]["stops"]

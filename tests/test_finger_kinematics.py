@@ -41,7 +41,8 @@ def finger(tmp_path_factory):
     """(node process, probe) on a module-wide exclusive domain."""
     mp = pytest.MonkeyPatch()
     domain = acquire_domain()
-    for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_PYTHON_CHECK_FIELDS", "FASTDDS_BUILTIN_TRANSPORTS"):
+    for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_PYTHON_CHECK_FIELDS",
+              "FASTDDS_BUILTIN_TRANSPORTS"):
         mp.setenv(k, domain.env[k])
     mp.delenv("ROS_LOCALHOST_ONLY", raising=False)
     log = tmp_path_factory.mktemp("finger") / "kinematics_node.log"

@@ -152,6 +152,7 @@ class FaultInjector:
         self._futures = []
         self._sim_abs = 0.0         # /clock at the last tick
         self.held = set()          # nodes SIGSTOPped now (their silence is the fault's)
+        self.clock_paused = False  # sim_node paused by a clock_stall (no /clock on purpose)
         for f in faults:
             self._plan(f)
         self.pending.sort(key=lambda a: a[0])
@@ -188,9 +189,12 @@ class FaultInjector:
                 self.supervisor.process(f.target).send(signal.SIGKILL)
             self._at(at, f"{f.label()}: SIGKILL {f.target}", kill)
         elif k == "clock_stall":
-            self._at(at, f"{f.label()}: clock paused", lambda: self._set("sim_node", paused=True),
-                     wall_after=(f.duration, f"{f.label()}: clock running",
-                                 lambda: self._set("sim_node", paused=False)))
+            def pause(paused):
+                self.clock_paused = True    # until the run ends if resuming fails: not this check's stall
+                self._set("sim_node", paused=paused)
+                self.clock_paused = paused
+            self._at(at, f"{f.label()}: clock paused", lambda: pause(True),
+                     wall_after=(f.duration, f"{f.label()}: clock running", lambda: pause(False)))
         elif k == "sigstop":
             def stop():
                 self.held.add(f.target)

@@ -69,7 +69,7 @@ from soft_robot_common.supervision import RestartPolicy, Supervisor
 from frog_twin.core import twin_report
 from frog_twin.core.cases import PATH_NAMES, path_start_pose, placed_path_settings
 from frog_twin.core.faults import FaultSpecError, check_against_graph, fault_report, parse_faults
-from frog_twin.core.liveness import DEAF_AFTER_S, DeafWatch
+from frog_twin.core.liveness import DEAF_AFTER_S, WORLD_STALL_S, ClockWatch, DeafWatch
 # the realism defaults of the twin (each switchable; see --help)
 from frog_twin.core.realism import (HARDWARE_PERIOD_S, KICK_STRENGTH_SD, LIMB_STRENGTH_SD, YAW_DISTURBANCE_SD,
                                     YAW_DISTURBANCE_TAU_S)
@@ -310,6 +310,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
     domain = acquire_domain()
     watch = PlannerWatch(domain)
     deaf = DeafWatch(args.deaf_tracker_after) if args.deaf_tracker_after > 0 else None
+    world = ClockWatch(args.world_stall_after) if args.world_stall_after > 0 else None
     observer = RunObserver(watch.node, deaf)
     supervisor = Supervisor(RestartPolicy(), essential=ESSENTIAL_NODES, log=lambda s: print("  " + s, flush=True),
                             on_restart=lambda name, proc: observer.node_restarted(name))
@@ -353,6 +354,13 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
                 break
             if deaf is not None:
                 _check_tracker_hears(deaf, supervisor, injector)
+            if world is not None:
+                stalled = world.stalled_for(time.monotonic(), observer.sim_now,
+                                            injector.clock_paused or "sim_node" in injector.held)
+                if stalled is not None:     # before a starved restarted tracker is taken for hung
+                    stop_reason = (f"the simulated world stalled: /clock has not advanced for {stalled:.0f} s "
+                                   f"(wall) with nothing pausing it (sim_node blocked?)")
+                    break
             observer.watch_recorder("recorder" in supervisor.names() and not supervisor.down("recorder")
                                     and watch.subscribed("recorder", PLANNER_TOPICS))
             if watch.state == watch.Status.STATE_GOAL_REACHED:
@@ -690,6 +698,10 @@ def _main(argv=None) -> int:
                     help="kill and restart a running tracker_node that has received no camera frame for this long "
                          "[s wall] while camera_sim published (a live but deaf subscriber, docs/faults.md); "
                          f"0 = off (default {DEAF_AFTER_S:g})")
+    fg.add_argument("--world-stall-after", type=float, default=WORLD_STALL_S, metavar="S",
+                    help="stop the run when /clock has not advanced for this long [s wall] while no fault pauses "
+                         "it (a simulator blocked in the middleware, docs/faults.md); 0 = off "
+                         f"(default {WORLD_STALL_S:g})")
     fg.add_argument("--stuck-timeout", type=float, default=20.0,
                     help="stop the run cleanly when the planner has not followed for this long [s simulated], "
                          "counted from the end of a node's restart")
@@ -740,6 +752,8 @@ def _main(argv=None) -> int:
                      "also with --fault-campaign")
     if not args.deaf_tracker_after >= 0:
         ap.error("--deaf-tracker-after must be >= 0 (0 = off)")
+    if not args.world_stall_after >= 0:
+        ap.error("--world-stall-after must be >= 0 (0 = off)")
     if not args.stuck_timeout > 0:
         ap.error("--stuck-timeout must be > 0")
     try:

@@ -2,7 +2,7 @@
 
 import pytest
 
-from frog_twin.core.liveness import DeafWatch, tracker_stuck
+from frog_twin.core.liveness import ClockWatch, DeafWatch, tracker_stuck
 
 
 def feed(w, t0, t1, camera_rate, tracker_rate, cam0=0, trk0=0, tracker_reports=True, excused=lambda t: False):
@@ -88,6 +88,8 @@ def test_bad_settings_are_refused():
         DeafWatch(0.0, 10)
     with pytest.raises(ValueError, match="min_frames"):
         DeafWatch(8.0, 0)
+    with pytest.raises(ValueError, match="bound_s"):
+        ClockWatch(0.0)
 
 
 def test_the_twin_refuses_a_negative_bound(capsys):
@@ -96,3 +98,40 @@ def test_the_twin_refuses_a_negative_bound(capsys):
         _main(["--deaf-tracker-after", "-1"])
     assert exc.value.code == 2
     assert "--deaf-tracker-after must be >= 0 (0 = off)" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        _main(["--world-stall-after", "nan"])
+    assert exc.value.code == 2
+    assert "--world-stall-after must be >= 0 (0 = off)" in capsys.readouterr().err
+
+
+def test_a_running_clock_never_stalls():
+    watch = ClockWatch(bound_s=5.0)
+    assert all(watch.stalled_for(t, 100.0 + 0.5 * t, False) is None for t in range(60))
+
+
+def test_a_clock_that_stops_is_stalled_after_the_bound_and_stays_so():
+    watch = ClockWatch(bound_s=5.0)
+    for t in range(10):                       # runs, then stops at 104.5 s simulated (t = 9)
+        assert watch.stalled_for(t, 100.0 + 0.5 * t, False) is None
+    assert watch.stalled_for(13.9, 104.5, False) is None
+    assert watch.stalled_for(14.0, 104.5, False) == pytest.approx(5.0)
+    assert watch.stalled_for(30.0, 104.5, False) == pytest.approx(21.0)
+    assert watch.stalled_for(30.1, 104.6, False) is None      # it moves again
+
+
+def test_a_pause_on_purpose_is_excused_and_the_wait_restarts_after_it():
+    watch = ClockWatch(bound_s=5.0)
+    watch.stalled_for(0.0, 10.0, False)
+    for t in range(1, 30):                     # paused by the injector for 29 s
+        assert watch.stalled_for(float(t), 10.0, True) is None
+    assert watch.stalled_for(33.9, 10.0, False) is None        # 4.9 s after the excuse ended
+    assert watch.stalled_for(34.0, 10.0, False) == pytest.approx(5.0)
+
+
+def test_a_clock_seen_once_has_not_stalled_yet():
+    watch = ClockWatch(bound_s=5.0)
+    assert watch.stalled_for(0.0, None, False) is None
+    assert watch.stalled_for(100.0, None, False) is None      # no /clock yet: not this check's case
+    assert watch.stalled_for(101.0, 3.0, False) is None
+    assert watch.stalled_for(105.9, 3.0, False) is None
+    assert watch.stalled_for(106.0, 3.0, False) == pytest.approx(5.0)

@@ -106,3 +106,37 @@ def tracker_stuck(camera_frames: int, tracker_says: str | None, min_frames: int 
     if said_at is not None and last_pose_at is not None and last_pose_at > said_at:
         tracker_says = STILL_TRACKING[0]
     return camera_frames >= min_frames and (tracker_says is None or tracker_says in STILL_TRACKING)
+
+
+#: Wall seconds without ``/clock`` advancing, while nothing pauses it, after which the simulated
+#: world counts as stalled. Below a restarted tracker's 15 s to log its camera model: a blocked
+#: world also starves every restarted vision node of /clock, which must not spend their restarts.
+WORLD_STALL_S = 10.0
+
+
+@dataclass
+class ClockWatch:
+    """Is the simulated world still running? ``/clock`` is its heartbeat (sim_node publishes it as it
+    steps); once seen (session 26's series) sim_node blocked for good inside the middleware's
+    ``publish`` after another node's process was SIGKILLed, and time stopped for every node.
+
+    :meth:`stalled_for` is fed the newest ``/clock`` with the wall time; a pause on purpose (the
+    ``clock_stall`` fault, a SIGSTOPped sim_node) is excused, and the wait starts again after it.
+    """
+
+    bound_s: float = WORLD_STALL_S
+    _sim: float | None = None            # newest /clock [s]
+    _since: float | None = None          # wall time it last advanced (or an excuse ended)
+
+    def __post_init__(self):
+        if not self.bound_s > 0:
+            raise ValueError(f"world stall check: need bound_s > 0, got {self.bound_s}")
+
+    def stalled_for(self, now: float, sim_now: float | None, excused: bool) -> float | None:
+        """Wall seconds since ``/clock`` last advanced, once that is at least ``bound_s``; else None."""
+        if excused or sim_now is None or self._sim is None or sim_now > self._sim:
+            self._sim = sim_now
+            self._since = now
+            return None
+        silent = now - self._since
+        return silent if silent >= self.bound_s else None
