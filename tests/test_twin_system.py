@@ -33,12 +33,16 @@ def test_twin_closes_the_real_chain(small_library, tmp_path):
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert "warning:" not in r.stdout, r.stdout      # every node stopped cleanly (SIGINT, exit 0)
     (m,) = json.loads((out / "metrics.json").read_text())
-    # frames rendered and poses tracked within tolerance of the simulator's truth. The rate is a
-    # floor, not the twin's speed (bench/vision_tracker.py): on a loaded 2-core machine camera_sim
-    # renders fewer frames per simulated second (161 poses in a 12 s run seen in a CI run; 7.4 Hz
-    # beside two busy processes and a second test, 2026-12-05): a third of the camera's 15 Hz
+    # frames rendered and poses tracked within tolerance of the simulator's truth. How many frames
+    # camera_sim renders is the CPU's (161 poses in a 12 s run in a CI run; 4.1 Hz beside two busy
+    # processes and a second test, 2026-12-06) and bench/vision_renderer.py's; what the chain owes is
+    # a pose for (nearly) every frame the camera published while the tracker ran (91 % in that run:
+    # a tag lost once when the renderer stalled for 1.6 s)
     v = m["vision"]
-    assert v["n"] > 100 and v["rate_hz"] > 5, v
+    frames, poses = _header_stamps(m["recording"], "/camera/camera_info"), _header_stamps(m["recording"], "/frog/odom")
+    assert len(poses) == v["n"] >= 50, (len(poses), v)
+    published = sum(1 for t in frames if poses[0] <= t <= poses[-1])
+    assert len(set(poses) & set(frames)) >= 0.8 * published, (len(poses), published, v)    # poses at frame stamps
     assert v["position_mean_m"] < 0.003 and v["heading_mean_rad"] < 0.02, v
     # primitives chosen, serial lines written, limbs fired
     assert m["decisions"] >= 8 and sum(m["primitives_used"].values()) >= 5, m
@@ -65,6 +69,19 @@ def test_twin_closes_the_real_chain(small_library, tmp_path):
         with open(f, "rb") as fh:
             recorded |= {c.topic for c in make_reader(fh).get_summary().channels.values()}
     assert _layout_topics() <= recorded, _layout_topics() - recorded
+
+
+def _header_stamps(files, topic) -> list:
+    """Sorted header stamps [ns] of ``topic``'s messages in the recording."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    stamps = []
+    for f in files:
+        with open(f, "rb") as fh:
+            for _, _, _, msg in make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
+                    topics=[topic]):
+                stamps.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
+    return sorted(stamps)
 
 
 def _layout_topics() -> set:
