@@ -57,7 +57,9 @@ def test_twin_closes_the_real_chain(small_library, tmp_path):
     # the frog moved toward the goal along the path (truth)
     assert m["final_progress"] > 0.3 and m["mean_distance_m"] < 0.03, m
     # tf for viewers: the tracked and the true pose
-    assert m["tf_frames"].get("tank -> frog", 0) > 100 and m["tf_frames"].get("tank -> frog_true", 0) > 100, m
+    # (the tracker broadcasts one with each pose)
+    tf = m["tf_frames"]
+    assert tf.get("tank -> frog", 0) >= 0.9 * len(poses) and tf.get("tank -> frog_true", 0) > 100, m
     # outputs people look at, and a recording that decodes
     assert (out / "line.png").stat().st_size > 20_000 and (out / "line.mp4").stat().st_size > 10_000
     check = subprocess.run(["frog-log", "check", *m["recording"]], capture_output=True, text=True, timeout=300)
