@@ -202,6 +202,34 @@ def test_a_twin_terminated_or_killed_leaves_no_node_running(sig, small_library, 
     assert "closed 1 file(s)" in (out / "line" / "recorder.log").read_text()
 
 
+def _start_twin_under_way(small_library, out, log, *extra) -> subprocess.Popen:
+    """``frog-twin`` on the ellipse with ``extra`` options, its output in ``log``, returned once the
+    frog has been following for 3 s."""
+    import time
+    with open(log, "w") as f:
+        p = subprocess.Popen([sys.executable, "-m", "frog_twin.twin", "--library", str(small_library), "--path",
+                              "ellipse", "--duration", "90", "--seed", "3", *extra, "--out", str(out)],
+                             stdout=f, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 180
+        while "following" not in log.read_text() and p.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert "following" in log.read_text(), log.read_text()[-3000:]
+        time.sleep(3.0)                                     # the frog under way
+    except BaseException:
+        p.kill()
+        p.wait()
+        raise
+    return p
+
+
+def _node_pids(p: subprocess.Popen, log: Path, name: str) -> list[int]:
+    """The one running process of node ``name`` that the twin ``p`` started."""
+    pids = [pid for pid in _started_by(p.pid) if name.encode() in Path(f"/proc/{pid}/cmdline").read_bytes()]
+    assert len(pids) == 1, (name, pids, log.read_text()[-2000:])
+    return pids
+
+
 def test_a_deaf_tracker_is_killed_and_restarted_and_the_frog_completes_the_path(small_library, tmp_path):
     """A tracker alive but receiving nothing (the DDS wedge of docs/faults.md; here SIGSTOPped from
     outside the injector, so nothing excuses its silence): the twin sees camera_sim's published
@@ -211,20 +239,10 @@ def test_a_deaf_tracker_is_killed_and_restarted_and_the_frog_completes_the_path(
     import signal
     import time
     out, log = tmp_path / "twin", tmp_path / "twin.log"
-    with open(log, "w") as f:
-        p = subprocess.Popen([sys.executable, "-m", "frog_twin.twin", "--library", str(small_library), "--path",
-                              "ellipse", "--duration", "90", "--seed", "3", "--deaf-tracker-after", "6",
-                              "--out", str(out)], stdout=f, stderr=subprocess.STDOUT, text=True)
+    p = _start_twin_under_way(small_library, out, log, "--deaf-tracker-after", "6")
     tracker = None
     try:
-        deadline = time.monotonic() + 180
-        while "following" not in log.read_text() and p.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.2)
-        assert "following" in log.read_text(), log.read_text()[-3000:]
-        time.sleep(3.0)                                     # the frog under way
-        tracker = [pid for pid in _started_by(p.pid)
-                   if b"tracker_node" in Path(f"/proc/{pid}/cmdline").read_bytes()]
-        assert len(tracker) == 1, tracker
+        tracker = _node_pids(p, log, "tracker_node")
         os.kill(tracker[0], signal.SIGSTOP)
         t_stop = time.monotonic()
         assert p.wait(timeout=600) == 0, log.read_text()[-4000:]
@@ -265,19 +283,10 @@ def test_a_stalled_world_stops_the_run_with_that_reason(small_library, tmp_path)
     import signal
     import time
     out, log = tmp_path / "twin", tmp_path / "twin.log"
-    with open(log, "w") as f:
-        p = subprocess.Popen([sys.executable, "-m", "frog_twin.twin", "--library", str(small_library), "--path",
-                              "ellipse", "--duration", "90", "--seed", "3", "--world-stall-after", "4",
-                              "--out", str(out)], stdout=f, stderr=subprocess.STDOUT, text=True)
+    p = _start_twin_under_way(small_library, out, log, "--world-stall-after", "4")
     sim = None
     try:
-        deadline = time.monotonic() + 180
-        while "following" not in log.read_text() and p.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.2)
-        assert "following" in log.read_text(), log.read_text()[-3000:]
-        time.sleep(3.0)                                     # the frog under way
-        sim = [pid for pid in _started_by(p.pid) if b"sim_node" in Path(f"/proc/{pid}/cmdline").read_bytes()]
-        assert len(sim) == 1, sim
+        sim = _node_pids(p, log, "sim_node")
         os.kill(sim[0], signal.SIGSTOP)
         t_stop = time.monotonic()
         deadline = t_stop + 60
