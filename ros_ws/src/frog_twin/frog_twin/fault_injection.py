@@ -190,8 +190,7 @@ class FaultInjector:
             self._at(at, f"{f.label()}: SIGKILL {f.target}", kill)
         elif k == "clock_stall":
             def pause(paused):
-                self.clock_paused = True    # until the run ends if resuming fails: not this check's stall
-                self._set("sim_node", paused=paused)
+                self._set("sim_node", paused=paused)    # raises if it cannot: then the state is unchanged
                 self.clock_paused = paused
             self._at(at, f"{f.label()}: clock paused", lambda: pause(True),
                      wall_after=(f.duration, f"{f.label()}: clock running", lambda: pause(False)))
