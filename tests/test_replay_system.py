@@ -76,8 +76,10 @@ def test_short_replay_writes_the_comparison(sin1_run, library, tmp_path):
     for (x, y, h), (xs, ys, hs) in pairs:
         assert (xs, ys) == (x, y)
         assert math.remainder(hs - h - tag_yaw, 2 * math.pi) == pytest.approx(0.0, abs=1e-6)
-    # it moved and decided: a few periods in 6 simulated seconds
-    assert twin["decisions"] >= 3 and twin["mean_distance_m"] < 0.1
+    # it moved and decided: a few periods in 6 simulated seconds, at most one a period (the report ends
+    # at the time limit, not when the nodes had stopped: the world runs on meanwhile)
+    most = int(6 / setup.period) + 1
+    assert 3 <= twin["decisions"] <= most and twin["mean_distance_m"] < 0.1, (twin["decisions"], most)
     # the same replay again into the same folder: the recorder keeps the first file and starts the next;
     # the new report reads only its own (it had read both: every decision twice, two trajectories)
     r = subprocess.run(["frog-twin", "--replay", str(runs / "sin1.csv"), "--path", str(path_file), "--no-vision",
@@ -87,7 +89,7 @@ def test_short_replay_writes_the_comparison(sin1_run, library, tmp_path):
     assert "1 earlier recording(s)" in r.stdout, r.stdout[-2000:]
     (again,) = json.loads((folder / "sin1_replay.json").read_text())["twins"]
     assert [Path(f).name for f in again["recording"]] == ["sin1_001.mcap"]
-    assert abs(again["decisions"] - twin["decisions"]) <= 1, (again["decisions"], twin["decisions"])
+    assert 3 <= again["decisions"] <= most, (again["decisions"], most)     # both files read: about twice
 
 
 @pytest.mark.parametrize("args, named", [

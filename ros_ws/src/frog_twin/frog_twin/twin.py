@@ -382,6 +382,8 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
                 break
             if time.monotonic() - t_start > 10 * limit / args.real_time_factor + 60:
                 raise RuntimeError(f"{name}: the twin made too little progress in wall time (machine overloaded?)")
+        # the run ends here (the time limit exactly): the world runs on while the nodes stop
+        run_end = sim_start + limit if stop_reason and stop_reason.startswith("time limit") else observer.sim_now
         if stop_reason and not stop_reason.startswith("time limit"):
             print(f"  {name}: stopping: {stop_reason}", flush=True)
             watch.publish_stop()
@@ -399,7 +401,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
         raise RuntimeError(f"no recording in {out / 'recording'}; see {out}/recorder.log")
     files = readable_files(files, out / "recovered")    # a killed recorder's file, recovered
     rec = read_twin_recording(files)
-    metrics = twin_report.run_metrics(rec, name)
+    metrics = twin_report.run_metrics(rec, name, end_time=run_end)
     metrics["wall_time_s"] = wall
     metrics["goal_reached"] = goal
     metrics["stop_reason"] = None if goal else stop_reason

@@ -154,3 +154,27 @@ def test_a_run_stopped_after_one_pose_still_has_a_report():
     assert m["mean_distance_m"] == pytest.approx(0.035, abs=1e-9)
     assert m["max_distance_m"] == pytest.approx(0.04, abs=1e-9)
     assert m["start_time_s"] == 0.5
+
+
+def test_a_run_is_scored_up_to_its_end_not_what_was_recorded_while_the_nodes_stopped():
+    """A line run to a 6 s time limit, decisions every 1.42 s from t = 1 s: the recorder kept the
+    world (2 cm beside the line until 6 s, then 10 cm: the frog drifts on) and the planner's decisions
+    (two more) while the nodes stopped. Scored to its end, the run has the 4 decisions before 6 s
+    and the 2 cm offset; unbounded, the same recording has 6 and a larger mean."""
+    from frog_twin.core.twin_recording import TwinRecording
+    from frog_twin.core.twin_report import run_metrics
+    rec = TwinRecording()
+    rec.path = np.c_[np.linspace(0, 0.6, 50), np.zeros(50)]
+    t = np.arange(0.0, 8.5, 0.1)
+    rec.truth = np.c_[t, 0.01 * t, np.where(t <= 6.0 + 1e-9, 0.02, 0.10), np.zeros_like(t)]
+    rec.tracked = rec.truth.copy()
+    rec.status = np.zeros((1, 10))
+    rec.status[0, 0], rec.status[0, 8] = 1.0, 1
+    rec.primitives = [(1.0 + 1.42 * k, "F") for k in range(6)]      # 1.0 ... 8.1
+    rec.fired = [(td + 0.05, [1, 1]) for td, _ in rec.primitives]
+    ended = run_metrics(rec, "line", end_time=6.0)
+    assert ended["decisions"] == 4 and ended["limb_firings"] == 4 and ended["end_time_s"] == 6.0
+    assert ended["mean_distance_m"] == pytest.approx(0.02, abs=1e-9)
+    whole = run_metrics(rec, "line")
+    assert whole["decisions"] == 6 and whole["limb_firings"] == 6 and whole["end_time_s"] is None
+    assert whole["mean_distance_m"] > 0.04

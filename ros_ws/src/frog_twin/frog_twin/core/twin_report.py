@@ -24,18 +24,25 @@ HARDWARE = {"line": (0.5, 1.4), "sine": (1.7, 3.3), "sinusoid": (1.7, 3.3), "ell
 STATE_GOAL_REACHED = 2   # PlannerStatus.STATE_GOAL_REACHED (the core does not import messages)
 
 
-def run_metrics(rec: TwinRecording, path_name: str) -> dict:
-    """All figures of one run (SI units), from the recording."""
+def run_metrics(rec: TwinRecording, path_name: str, end_time: float | None = None) -> dict:
+    """All figures of one run (SI units), from the recording.
+
+    ``end_time`` [s, the recording's clock] ends the run: what the recorder caught after it
+    (the world runs on while the nodes are stopped, longer on a loaded machine) is not scored.
+    """
     if rec.path is None or len(rec.truth) < 2:
         raise ValueError("the recording has no reference path or too little ground truth")
+    end = np.inf if end_time is None else float(end_time)
     goal_rows = rec.status[rec.status[:, 8] == STATE_GOAL_REACHED] if len(rec.status) else rec.status
     goal_time = float(goal_rows[0, 0]) if len(goal_rows) else None
     following = rec.status[rec.status[:, 8] == 1] if len(rec.status) else rec.status
     start = float(following[0, 0]) if len(following) else float(rec.truth[0, 0])
-    truth = rec.truth[rec.truth[:, 0] >= start - 1e-9]
+    in_run = rec.truth[rec.truth[:, 0] <= end + 1e-9]
+    truth = in_run[in_run[:, 0] >= start - 1e-9]
     if len(truth) < 2:      # a run stopped at once (real mode: one pose after the start): its last two poses
-        truth = rec.truth[-2:]
-    prims = [n for t, n in rec.primitives if t >= start - 1e-9 and (goal_time is None or t < goal_time - 1e-9)]
+        truth = in_run[-2:] if len(in_run) >= 2 else rec.truth[:2]
+    last = end if goal_time is None else min(goal_time, end)
+    prims = [n for t, n in rec.primitives if start - 1e-9 <= t < last - 1e-9]
     m = tracking_metrics(truth[:, 0], truth[:, 1:3], rec.path, goal_time=goal_time, primitives=prims)
     m["path"] = path_name
     m["start_time_s"] = start
@@ -50,7 +57,8 @@ def run_metrics(rec: TwinRecording, path_name: str) -> dict:
     decided = [t for t, n in rec.primitives if n != "I"]
     m["latency_decision_to_firing"] = latency_stats(decided, [t for t, limbs in rec.fired if limbs])
     m["latency_decision_to_serial"] = latency_stats(decided, [t for t, limbs in rec.sent if limbs])
-    m["limb_firings"] = sum(1 for _, limbs in rec.fired if limbs)
+    m["limb_firings"] = sum(1 for t, limbs in rec.fired if limbs and t <= end + 1e-9)
+    m["end_time_s"] = None if end_time is None else end
     m["tf_frames"] = {f"{a} -> {b}": n for (a, b), n in sorted(rec.tf_frames.items())}
     m["hardware_mean_distance_cm"] = HARDWARE.get(path_name)
     m["hardware_speed_cm_per_s"] = HARDWARE["speed_cm_per_s"]
