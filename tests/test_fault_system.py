@@ -45,12 +45,14 @@ def _run(small_library, tmp_path, spec, *extra):
 def test_recoverable_faults_complete_the_path_with_nothing_fired_on_stale_state(cls, small_library, tmp_path):
     m, stdout, out = _run(small_library, tmp_path, FAULT_CLASSES[cls])
     rep = m["faults"]
-    # a restarted tracker that never got a camera model (docs/faults.md) is killed and restarted
-    # again by the supervisor: one more restart and up to RESTART_READY_TIMEOUT_S more to recover
+    # a restarted tracker that never got a camera model, or a restarted recorder that records nothing
+    # (the restarted-reader wedge, docs/faults.md), is killed and restarted again by the supervisor:
+    # one more restart and up to RESTART_READY_TIMEOUT_S more to recover
     hung = [e["node"] for e in m["supervision"]["events"] if e["what"] == "hung"]
-    assert set(hung) <= {"tracker_node"}, m["supervision"]["events"]
+    assert set(hung) <= {"tracker_node", "recorder"}, m["supervision"]["events"]
     if hung:
-        warnings.warn(f"a restarted tracker hung and was restarted again ({len(hung)}x, docs/faults.md)")
+        warnings.warn(f"a restarted {'/'.join(sorted(set(hung)))} hung and was restarted again ({len(hung)}x, "
+                      f"docs/faults.md)")
     faults = parse_faults(FAULT_CLASSES[cls])
     done = [what for _, what in rep["actions"]]
     for f in faults:       # every fault was applied while the frog was on the path, none refused
@@ -225,7 +227,9 @@ def _start_twin_under_way(small_library, out, log, *extra) -> subprocess.Popen:
 
 def _node_pids(p: subprocess.Popen, log: Path, name: str) -> list[int]:
     """The one running process of node ``name`` that the twin ``p`` started."""
-    pids = [pid for pid in _started_by(p.pid) if name.encode() in Path(f"/proc/{pid}/cmdline").read_bytes()]
+    exe = b"/" + name.encode()            # its executable (other nodes' arguments may name it)
+    pids = [pid for pid in _started_by(p.pid)
+            if any(a.endswith(exe) for a in Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0"))]
     assert len(pids) == 1, (name, pids, log.read_text()[-2000:])
     return pids
 
@@ -271,6 +275,54 @@ def test_a_deaf_tracker_is_killed_and_restarted_and_the_frog_completes_the_path(
     if not m["goal_reached"]:     # only when every restart after the deaf kill met that wedge
         assert len(later) == 2 and m["stop_reason"].startswith("tracker_node exited (SIGKILL; 3 restart(s) used)"), \
             (m["stop_reason"], log.read_text()[-3000:])
+
+
+def test_a_deaf_recorder_is_killed_and_restarted_into_a_new_file(small_library, tmp_path):
+    """A recorder alive but recording nothing (the restarted-reader wedge met by a restarted recorder in
+    session 29's series; here SIGSTOPped from outside the injector, so nothing excuses it): the twin sees
+    the planner's messages published and the recorder's counts in /diagnostics not rising, kills it
+    after --deaf-recorder-after, the supervisor restarts it into the next file, and the recording of
+    the run is complete outside the deaf time (a late fault gives the run its fault report)."""
+    import os
+    import signal
+    import time
+    out, log = tmp_path / "twin", tmp_path / "twin.log"
+    p = _start_twin_under_way(small_library, out, log, "--deaf-recorder-after", "6", "--faults", "ble_loss@30+1")
+    recorder = None
+    try:
+        recorder = _node_pids(p, log, "recorder")
+        os.kill(recorder[0], signal.SIGSTOP)
+        t_stop = time.monotonic()
+        assert p.wait(timeout=600) == 0, log.read_text()[-4000:]
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+        for pid in recorder or ():            # never leave a stopped process behind
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+    (m,) = json.loads((out / "metrics.json").read_text())
+    events = m["supervision"]["events"]
+    hung = [e for e in events if e["what"] == "hung" and e["node"] == "recorder"]
+    assert hung and all(e["detail"].startswith("deaf: nothing recorded on /frog/") for e in hung), events
+    # silent since its last diagnostics (1 Hz, up to 1 s before the stop): not before the bound, and soon after
+    assert 6.0 - 1.5 <= hung[0]["time"] - t_stop < 6.0 + 5.0, (hung[0]["time"] - t_stop, events)
+    assert m["supervision"]["restarts"]["recorder"] == len(hung) and m["goal_reached"], (events, m["stop_reason"])
+    if len(hung) > 1:    # the restarted recorder met the restarted-reader wedge: killed and restarted again
+        warnings.warn(f"{len(hung) - 1} restarted recorder(s) recorded nothing and were restarted again "
+                      f"(docs/faults.md)")
+    rep = m["faults"]
+    assert rep["outcome"] == "completed" and rep["recorder_lost"] == 0, (rep["recorder"], rep["recorder_deaf"])
+    deaf = rep["recorder_deaf"]
+    assert len(deaf) == len(hung) and all(topic.startswith("/frog/") and 0.0 < t0 < t1 for t0, t1, topic in deaf)
+    assert deaf[0][1] - deaf[0][0] >= 4.5 and rep["recorder_deaf_missed"] >= 3, (deaf, rep["recorder_deaf_missed"])
+    # the stopped recorder's file (recovered) and each restarted one's: the last holds the run's end
+    names = sorted(f.name for f in (out / "ellipse" / "recording").glob("*.mcap"))
+    assert names == [f"ellipse_{k:03d}.mcap" for k in range(len(hung) + 1)], names
+    assert any(Path(f).parent.name == "recovered" for f in m["recording"]), m["recording"]
+    assert len(rep["recorder_up"]) == len(hung) + 1, rep["recorder_up"]     # up, deaf (not up), up again
 
 
 def test_a_stalled_world_stops_the_run_with_that_reason(small_library, tmp_path):

@@ -33,7 +33,7 @@ def _stamp(msg) -> float:
 class RunObserver:
     """Subscriptions of the watch node: sim time, odometry, decisions, firings, diagnostics."""
 
-    def __init__(self, node, deaf=None):
+    def __init__(self, node, deaf=None, recorder_watch=None):
         from diagnostic_msgs.msg import DiagnosticArray
         from nav_msgs.msg import Odometry
         from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -41,6 +41,8 @@ class RunObserver:
         from soft_robot_interfaces.msg import LimbActivation, PlannerStatus, Primitive
         self.node = node
         self.deaf = deaf                # a frog_twin.core.liveness.DeafWatch fed from /diagnostics, or None
+        self.recorder_watch = recorder_watch    # a frog_twin.core.liveness.RecorderWatch, or None
+        self.recorder_deaf = []         # [(sim t0, sim t1, topic)]: the recorder alive, recording nothing on topic
         self.obs = Observed()
         self.seen = {t: [] for t in CHECKED_TOPICS}
         self.sim_now = None
@@ -100,6 +102,26 @@ class RunObserver:
                 if frames is not None and frames.isdigit():
                     feed = self.deaf.camera if st.name.startswith("camera_sim:") else self.deaf.tracker
                     feed(time.monotonic(), int(frames))
+            if self.recorder_watch is not None and st.name.startswith("recorder:"):
+                counts = {kv.key[len("messages "):]: int(kv.value) for kv in st.values
+                          if kv.key.startswith("messages ") and kv.value.isdigit()}
+                self.recorder_watch.recorded(time.monotonic(), _stamp(msg), counts)
+
+    def seen_counts(self) -> dict:
+        """{checked topic: messages this node saw on it so far}."""
+        return {t: len(stamps) for t, stamps in self.seen.items()}
+
+    def recorder_went_deaf(self, topic: str, heard_at) -> None:
+        """The recorder recorded nothing on ``topic`` since ``heard_at`` (its diagnostics' stamp, or
+        None): it was not up since then (it is killed and restarted next)."""
+        if self.sim_now is None:
+            return
+        known = [t for t in (heard_at, self._up_since) if t is not None]
+        since = max(known) if known else self.sim_now
+        if self._up_since is not None:
+            self.recorder_up.append((self._up_since, since))
+            self._up_since = None
+        self.recorder_deaf.append((since, self.sim_now, topic))
 
     def node_restarted(self, name: str) -> None:
         if self.sim_now is not None:

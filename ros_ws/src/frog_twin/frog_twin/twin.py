@@ -69,7 +69,7 @@ from soft_robot_common.supervision import RestartPolicy, Supervisor
 from frog_twin.core import twin_report
 from frog_twin.core.cases import PATH_NAMES, path_start_pose, placed_path_settings
 from frog_twin.core.faults import FaultSpecError, check_against_graph, fault_report, parse_faults
-from frog_twin.core.liveness import DEAF_AFTER_S, WORLD_STALL_S, ClockWatch, DeafWatch
+from frog_twin.core.liveness import DEAF_AFTER_S, WORLD_STALL_S, ClockWatch, DeafWatch, RecorderWatch
 # the realism defaults of the twin (each switchable; see --help)
 from frog_twin.core.realism import (HARDWARE_PERIOD_S, KICK_STRENGTH_SD, LIMB_STRENGTH_SD, YAW_DISTURBANCE_SD,
                                     YAW_DISTURBANCE_TAU_S)
@@ -311,7 +311,9 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
     watch = PlannerWatch(domain)
     deaf = DeafWatch(args.deaf_tracker_after) if args.deaf_tracker_after > 0 else None
     world = ClockWatch(args.world_stall_after) if args.world_stall_after > 0 else None
-    observer = RunObserver(watch.node, deaf)
+    recorder_watch = (RecorderWatch(CHECKED_TOPICS, args.deaf_recorder_after)
+                      if args.deaf_recorder_after > 0 and "recorder" in graph.names() else None)
+    observer = RunObserver(watch.node, deaf, recorder_watch)
     supervisor = Supervisor(RestartPolicy(), essential=ESSENTIAL_NODES, log=lambda s: print("  " + s, flush=True),
                             on_restart=lambda name, proc: observer.node_restarted(name))
     injector = None
@@ -354,6 +356,9 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
                 break
             if deaf is not None:
                 _check_tracker_hears(deaf, supervisor, injector)
+            if recorder_watch is not None:
+                _check_recorder_records(recorder_watch, observer, supervisor, injector,
+                                        watch.subscribed("recorder", PLANNER_TOPICS))
             if world is not None:
                 stalled = world.stalled_for(time.monotonic(), observer.sim_now,
                                             injector.clock_paused or "sim_node" in injector.held)
@@ -450,6 +455,25 @@ def _check_tracker_hears(deaf: DeafWatch, supervisor: Supervisor, injector: Faul
         supervisor.kill_hung("tracker_node", f"deaf: no camera frame received for {silent:.1f} s while camera_sim "
                                              f"published {deaf.published}")
         deaf.restart(time.monotonic())
+
+
+def _check_recorder_records(rw: RecorderWatch, observer: RunObserver, supervisor: Supervisor,
+                            injector: FaultInjector, subscribed: bool) -> None:
+    """Kill a running recorder that records nothing on a checked topic while this node sees it
+    published (frog_twin.core.liveness); the supervisor restarts it into a new file. Excused while
+    it or any node is down or restarting, it is SIGSTOPped by the injector, or not yet subscribed."""
+    now = time.monotonic()
+    rw.published(now, observer.seen_counts())
+    # a restarted publisher is matched by each subscriber after its own discovery: excused too
+    excused = supervisor.down("recorder") or bool(supervisor.recovering()) or "recorder" in injector.held \
+        or not subscribed
+    deaf = rw.deaf_for(now, excused)
+    if deaf is not None:
+        topic, silent, published = deaf
+        observer.recorder_went_deaf(topic, rw.heard_at[topic])
+        supervisor.kill_hung("recorder", f"deaf: nothing recorded on {topic} for {silent:.1f} s while "
+                                         f"{published} were published")
+        rw.restart(time.monotonic())
 
 
 def _projector(rec):
@@ -700,6 +724,11 @@ def _main(argv=None) -> int:
                     help="kill and restart a running tracker_node that has received no camera frame for this long "
                          "[s wall] while camera_sim published (a live but deaf subscriber, docs/faults.md); "
                          f"0 = off (default {DEAF_AFTER_S:g})")
+    fg.add_argument("--deaf-recorder-after", type=float, default=DEAF_AFTER_S, metavar="S",
+                    help="kill and restart a running recorder that has recorded nothing on a checked topic "
+                         "(/frog/primitive, /frog/planner/status, /frog/bridge/sent, /frog/limb_activation) for "
+                         "this long [s wall] while the twin saw it published (docs/faults.md); "
+                         f"0 = off (default {DEAF_AFTER_S:g})")
     fg.add_argument("--world-stall-after", type=float, default=WORLD_STALL_S, metavar="S",
                     help="stop the run when /clock has not advanced for this long [s wall] while no fault pauses "
                          "it (a simulator blocked in the middleware, docs/faults.md); 0 = off "
@@ -754,6 +783,8 @@ def _main(argv=None) -> int:
                      "also with --fault-campaign")
     if not args.deaf_tracker_after >= 0:
         ap.error("--deaf-tracker-after must be >= 0 (0 = off)")
+    if not args.deaf_recorder_after >= 0:
+        ap.error("--deaf-recorder-after must be >= 0 (0 = off)")
     if not args.world_stall_after >= 0:
         ap.error("--world-stall-after must be >= 0 (0 = off)")
     if not args.stuck_timeout > 0:

@@ -2,7 +2,7 @@
 
 import pytest
 
-from frog_twin.core.liveness import ClockWatch, DeafWatch, tracker_stuck
+from frog_twin.core.liveness import ClockWatch, DeafWatch, RecorderWatch, tracker_stuck
 
 
 def feed(w, t0, t1, camera_rate, tracker_rate, cam0=0, trk0=0, tracker_reports=True, excused=lambda t: False):
@@ -99,6 +99,10 @@ def test_the_twin_refuses_a_negative_bound(capsys):
     assert exc.value.code == 2
     assert "--deaf-tracker-after must be >= 0 (0 = off)" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:
+        _main(["--deaf-recorder-after", "-1"])
+    assert exc.value.code == 2
+    assert "--deaf-recorder-after must be >= 0 (0 = off)" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
         _main(["--world-stall-after", "nan"])
     assert exc.value.code == 2
     assert "--world-stall-after must be >= 0 (0 = off)" in capsys.readouterr().err
@@ -135,3 +139,74 @@ def test_a_clock_seen_once_has_not_stalled_yet():
     assert watch.stalled_for(101.0, 3.0, False) is None
     assert watch.stalled_for(105.9, 3.0, False) is None
     assert watch.stalled_for(106.0, 3.0, False) == pytest.approx(5.0)
+
+
+TOPICS = ("/frog/primitive", "/frog/planner/status", "/frog/bridge/sent", "/frog/limb_activation")
+
+
+def run_recorder(w, t1, recorded_rate, period=1.43, wedged_from=None, wedged=(), reported=TOPICS):
+    """A planner deciding every ``period`` s (a primitive and a status each time, a firing on sent and
+    limb_activation every other one), the watch seeing all; the recorder's diagnostics every second
+    (stamped on the same clock) with its counts, which stop rising on ``wedged`` topics from
+    ``wedged_from``. The first answer of deaf_for(), or None."""
+    rec = dict.fromkeys(reported, 0)
+    for t in range(int(t1) + 1):
+        decisions = int(t / period)
+        seen = {TOPICS[0]: decisions, TOPICS[1]: decisions, TOPICS[2]: decisions // 2, TOPICS[3]: decisions // 2}
+        w.published(t, seen)
+        for topic in reported:
+            if not (wedged_from is not None and t >= wedged_from and topic in wedged):
+                rec[topic] = int(seen[topic] * recorded_rate)
+        w.recorded(t + 0.3, float(t), dict(rec))
+        d = w.deaf_for(t + 0.5, False)
+        if d is not None:
+            return t + 0.5, d
+    return None
+
+
+def test_a_recorder_that_records_is_never_deaf():
+    assert run_recorder(RecorderWatch(TOPICS, 8.0), 120, 1.0) is None
+
+
+def test_a_recorder_that_stops_recording_one_topic_is_deaf_on_it_after_the_bound():
+    """Session 29's restarted recorder: subscribed, recording nothing on the planner's topics."""
+    w = RecorderWatch(TOPICS, 8.0)
+    when, (topic, silent, published) = run_recorder(w, 120, 1.0, wedged_from=30, wedged=(TOPICS[0],))
+    assert topic == TOPICS[0] and 8.0 <= silent < 10.0 and published >= 5
+    # deaf from the diagnostics of its last rise: the last second before 30 s with a new decision
+    last_rise = max(t for t in range(1, 30) if int(t / 1.43) > int((t - 1) / 1.43))
+    assert w.heard_at[TOPICS[0]] == last_rise == 29.0 and 36.0 <= when <= 40.0
+    assert w.heard_at[TOPICS[1]] > 35.0                 # the others were recorded meanwhile
+
+
+def test_a_topic_the_recorder_never_reports_is_deaf_once_published():
+    when, (topic, _, _) = run_recorder(RecorderWatch(TOPICS, 8.0), 60, 1.0, reported=TOPICS[:3])
+    assert topic == TOPICS[3] and when < 20
+
+
+def test_a_quiet_topic_is_not_deaf_and_a_new_recorder_process_counts_as_recording():
+    w = RecorderWatch(TOPICS, 8.0)
+    for t in range(60):                  # the planner publishes I: nothing on sent / limb_activation
+        w.published(t, {TOPICS[0]: t, TOPICS[1]: t, TOPICS[2]: 0, TOPICS[3]: 0})
+        # a restarted recorder at 30 s: its counts start again from 0
+        w.recorded(t + 0.3, float(t), {TOPICS[0]: t if t < 30 else t - 30, TOPICS[1]: t if t < 30 else t - 30,
+                                       TOPICS[2]: 0, TOPICS[3]: 0})
+        assert w.deaf_for(t + 0.5, False) is None, t
+    assert w.heard_at[TOPICS[0]] == 59.0 and w.heard_at[TOPICS[2]] is None
+
+
+def test_a_new_recorder_process_that_records_nothing_has_heard_nothing():
+    """Session 29: the recorder restarted after a kill reports 0 on the planner's topics: its deaf time
+    starts where it subscribed (heard_at None), not at its first diagnostics."""
+    w = RecorderWatch(TOPICS, 8.0)
+    w.recorded(0.3, 10.0, {TOPICS[0]: 7})
+    w.recorded(1.3, 11.0, {TOPICS[0]: 8})
+    assert w.heard_at[TOPICS[0]] == 11.0
+    w.recorded(5.3, 15.0, {TOPICS[0]: 0})          # the restarted process
+    assert w.heard_at[TOPICS[0]] is None
+    w.recorded(6.3, 16.0, {TOPICS[0]: 0})
+    assert w.heard_at[TOPICS[0]] is None
+    w.recorded(7.3, 17.0, {TOPICS[0]: 2})
+    assert w.heard_at[TOPICS[0]] == 17.0
+    w.recorded(9.3, 19.0, {TOPICS[0]: 1})          # restarted again, and it recorded one already
+    assert w.heard_at[TOPICS[0]] == 19.0

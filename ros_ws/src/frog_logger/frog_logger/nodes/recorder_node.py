@@ -248,7 +248,7 @@ class RecorderNode(Node):
             KeyValue(key="messages", value=str(rec.message_count)),
             KeyValue(key="dropped_messages", value=str(rec.dropped_messages)),
             KeyValue(key="files", value=str(len(rec.files))),
-        ]
+        ] + [KeyValue(key=f"messages {t.name}", value=str(t.message_count)) for t in rec.topics.values()]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(msg)

@@ -140,3 +140,65 @@ class ClockWatch:
             return None
         silent = now - self._since
         return silent if silent >= self.bound_s else None
+
+
+#: Messages published on a checked topic while the recorder recorded none on it, within the
+#: bound, for it to count as deaf: the planner publishes a primitive and a status every period
+#: (1.43 s), so 8 s carry 5 of each.
+RECORDER_DEAF_MIN_MESSAGES = 3
+
+
+@dataclass
+class RecorderWatch:
+    """Is the running recorder still recording what is published? A restarted recorder was once seen
+    (session 29's series) subscribed in the graph and recording nothing on four topics for 30 s: the
+    restarted-reader wedge of the tracker (docs/faults.md), in the recorder. Per topic a
+    :class:`DeafWatch`: the watch's own count of the messages it saw against the recorder's count
+    of the messages it recorded (its ``/diagnostics``: ``messages <topic>``).
+
+    ``heard_at[topic]`` is the recorder's stamp (its clock) on the last diagnostics whose count had
+    risen (None while the running process has recorded nothing on it): what was published before it
+    is recorded; a deaf time starts there, or where the process subscribed.
+    """
+
+    topics: tuple
+    bound_s: float = DEAF_AFTER_S
+    min_messages: int = RECORDER_DEAF_MIN_MESSAGES
+
+    def __post_init__(self):
+        self._watches = {t: DeafWatch(self.bound_s, self.min_messages) for t in self.topics}
+        self.heard_at = {t: None for t in self.topics}
+        self._counts = {t: None for t in self.topics}
+
+    def published(self, now: float, counts: dict) -> None:
+        """The watch's own counts {topic: messages seen so far}."""
+        for t, n in counts.items():
+            if t in self._watches:
+                self._watches[t].camera(now, n)
+
+    def recorded(self, now: float, stamp: float, counts: dict) -> None:
+        """The recorder's diagnostics: {topic: messages recorded so far} at its ``stamp``."""
+        for t, n in counts.items():
+            if t in self._watches:
+                prev = self._counts[t]
+                if prev is not None and n < prev:          # a new process: heard only if it recorded some
+                    self.heard_at[t] = stamp if n > 0 else None
+                elif n > (prev or 0):
+                    self.heard_at[t] = stamp
+                self._counts[t] = n
+                self._watches[t].tracker(now, n)
+
+    def restart(self, now: float) -> None:
+        """Start waiting again (an excuse ended, the recorder was restarted)."""
+        for w in self._watches.values():
+            w.restart(now)
+
+    def deaf_for(self, now: float, excused: bool) -> tuple[str, float, int] | None:
+        """(topic, seconds the recorder recorded nothing on it, messages published meanwhile) for
+        the first deaf topic, once that is at least ``bound_s``; else None."""
+        found = None
+        for t, w in self._watches.items():
+            silent = w.deaf_for(now, excused)
+            if silent is not None and found is None:
+                found = (t, silent, w.published)
+        return found
