@@ -234,32 +234,40 @@ def _node_pids(p: subprocess.Popen, log: Path, name: str) -> list[int]:
     return pids
 
 
-def test_a_deaf_tracker_is_killed_and_restarted_and_the_frog_completes_the_path(small_library, tmp_path):
-    """A tracker alive but receiving nothing (the DDS wedge of docs/faults.md; here SIGSTOPped from
-    outside the injector, so nothing excuses its silence): the twin sees camera_sim's published
-    frames rise in /diagnostics and the tracker's not, kills it after --deaf-tracker-after, the
-    supervisor restarts it, and the frog completes the path."""
+def _twin_with_node_stopped(small_library, tmp_path, node: str, *extra):
+    """``frog-twin`` under way with ``node`` SIGSTOPped from outside the injector (nothing excuses its
+    silence); waits for the twin's end, never leaves a stopped process behind. (metrics, SIGSTOP's
+    monotonic time, the twin's log)."""
     import os
     import signal
     import time
     out, log = tmp_path / "twin", tmp_path / "twin.log"
-    p = _start_twin_under_way(small_library, out, log, "--deaf-tracker-after", "6")
-    tracker = None
+    p = _start_twin_under_way(small_library, out, log, *extra)
+    stopped = None
     try:
-        tracker = _node_pids(p, log, "tracker_node")
-        os.kill(tracker[0], signal.SIGSTOP)
+        stopped = _node_pids(p, log, node)
+        os.kill(stopped[0], signal.SIGSTOP)
         t_stop = time.monotonic()
         assert p.wait(timeout=600) == 0, log.read_text()[-4000:]
     finally:
         if p.poll() is None:
             p.kill()
             p.wait()
-        for pid in tracker or ():            # never leave a stopped process behind
+        for pid in stopped or ():
             try:
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
     (m,) = json.loads((out / "metrics.json").read_text())
+    return m, t_stop, log
+
+
+def test_a_deaf_tracker_is_killed_and_restarted_and_the_frog_completes_the_path(small_library, tmp_path):
+    """A tracker alive but receiving nothing (the DDS wedge of docs/faults.md; here SIGSTOPped from
+    outside the injector, so nothing excuses its silence): the twin sees camera_sim's published
+    frames rise in /diagnostics and the tracker's not, kills it after --deaf-tracker-after, the
+    supervisor restarts it, and the frog completes the path."""
+    m, t_stop, log = _twin_with_node_stopped(small_library, tmp_path, "tracker_node", "--deaf-tracker-after", "6")
     events = m["supervision"]["events"]
     hung = [e for e in events if e["what"] == "hung"]
     assert hung and hung[0]["node"] == "tracker_node" and hung[0]["detail"].startswith(
@@ -283,27 +291,9 @@ def test_a_deaf_recorder_is_killed_and_restarted_into_a_new_file(small_library, 
     the planner's messages published and the recorder's counts in /diagnostics not rising, kills it
     after --deaf-recorder-after, the supervisor restarts it into the next file, and the recording of
     the run is complete outside the deaf time (a late fault gives the run its fault report)."""
-    import os
-    import signal
-    import time
-    out, log = tmp_path / "twin", tmp_path / "twin.log"
-    p = _start_twin_under_way(small_library, out, log, "--deaf-recorder-after", "6", "--faults", "ble_loss@30+1")
-    recorder = None
-    try:
-        recorder = _node_pids(p, log, "recorder")
-        os.kill(recorder[0], signal.SIGSTOP)
-        t_stop = time.monotonic()
-        assert p.wait(timeout=600) == 0, log.read_text()[-4000:]
-    finally:
-        if p.poll() is None:
-            p.kill()
-            p.wait()
-        for pid in recorder or ():            # never leave a stopped process behind
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-    (m,) = json.loads((out / "metrics.json").read_text())
+    out = tmp_path / "twin"
+    m, t_stop, _ = _twin_with_node_stopped(small_library, tmp_path, "recorder", "--deaf-recorder-after", "6",
+                                           "--faults", "ble_loss@30+1")
     events = m["supervision"]["events"]
     hung = [e for e in events if e["what"] == "hung" and e["node"] == "recorder"]
     assert hung and all(e["detail"].startswith("deaf: nothing recorded on /frog/") for e in hung), events
