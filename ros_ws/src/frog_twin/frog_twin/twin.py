@@ -726,8 +726,8 @@ def _main(argv=None) -> int:
                          f"0 = off (default {DEAF_AFTER_S:g})")
     fg.add_argument("--deaf-recorder-after", type=float, default=DEAF_AFTER_S, metavar="S",
                     help="kill and restart a running recorder that has recorded nothing on a checked topic "
-                         "(/frog/primitive, /frog/planner/status, /frog/bridge/sent, /frog/limb_activation) for "
-                         "this long [s wall] while the twin saw it published (docs/faults.md); "
+                         f"({', '.join(CHECKED_TOPICS)}) for this long [s wall] while the twin saw it published "
+                         "(docs/faults.md); "
                          f"0 = off (default {DEAF_AFTER_S:g})")
     fg.add_argument("--world-stall-after", type=float, default=WORLD_STALL_S, metavar="S",
                     help="stop the run when /clock has not advanced for this long [s wall] while no fault pauses "
