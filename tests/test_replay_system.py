@@ -80,6 +80,7 @@ def test_short_replay_writes_the_comparison(sin1_run, library, tmp_path):
     # at the time limit, not when the nodes had stopped: the world runs on meanwhile)
     most = int(6 / setup.period) + 1
     assert 3 <= twin["decisions"] <= most and twin["mean_distance_m"] < 0.1, (twin["decisions"], most)
+    assert twin["duration_s"] <= 6.0 + 1e-6, twin["duration_s"]      # scored to the run's end, no further
     # the same replay again into the same folder: the recorder keeps the first file and starts the next;
     # the new report reads only its own (it had read both: every decision twice, two trajectories)
     r = subprocess.run(["frog-twin", "--replay", str(runs / "sin1.csv"), "--path", str(path_file), "--no-vision",
@@ -90,6 +91,7 @@ def test_short_replay_writes_the_comparison(sin1_run, library, tmp_path):
     (again,) = json.loads((folder / "sin1_replay.json").read_text())["twins"]
     assert [Path(f).name for f in again["recording"]] == ["sin1_001.mcap"]
     assert 3 <= again["decisions"] <= most, (again["decisions"], most)     # both files read: about twice
+    assert again["duration_s"] <= 6.0 + 1e-6, again["duration_s"]
 
 
 @pytest.mark.parametrize("args, named", [

@@ -105,9 +105,12 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
         a.node_params = _merged(paper_loop_params(args), getattr(args, "node_params", {}))   # --node-param last
         label = setup.name if len(args.seed_list) == 1 else f"{setup.name}_s{seed}"
         rec, tm = run_twin(a, label, folder / label, path_settings, setup.start_pose, settings, duration)
+        # the run's own window: from the first decision to its end (what the recorder caught while
+        # the nodes stopped is not the run's, as in the twin's report)
         t0 = tm["start_time_s"]
-        truth = rec.truth[rec.truth[:, 0] >= t0 - 1e-9]
-        decided = [(t - t0, n) for t, n in rec.primitives if t >= t0 - 1e-9]
+        t1 = math.inf if tm["end_time_s"] is None else tm["end_time_s"]
+        truth = rec.truth[(rec.truth[:, 0] >= t0 - 1e-9) & (rec.truth[:, 0] <= t1 + 1e-9)]
+        decided = [(t - t0, n) for t, n in rec.primitives if t0 - 1e-9 <= t < t1 - 1e-9]
         m = replay.replay_metrics(truth[:, 0] - t0, truth[:, 1:3], setup.path, [d for d, _ in decided],
                                   [n for _, n in decided], goal_tolerance=tol)
         m.update(seed=seed, planner_goal_time_s=tm["completion_time_s"], wall_time_s=tm["wall_time_s"],
