@@ -359,7 +359,9 @@ def test_killed_tracker_is_restarted_and_the_run_goes_on(sig, video, library, la
         PlannerStatus, "/frog/planner/status",
         lambda m: following.append(time.monotonic()) if m.state == PlannerStatus.STATE_FOLLOWING else None, 10)
     pub = probe.node.create_publisher(Empty, "/frog/stop", 10)
-    args = _real_args(video, link, library, out, ros_domain.domain_id, duration=150, tag_lost_timeout=2)
+    # tag-lost timeout 5 s: the camera's frames reached no one for 2.1 s once beside two busy processes
+    # (series of 2026-12-06, docs/faults.md), and no pose with no frames is a lost tag (the run stops)
+    args = _real_args(video, link, library, out, ros_domain.domain_id, duration=150, tag_lost_timeout=5)
     log = tmp_path / "frog_twin.out"
     with open(log, "w") as fh:
         proc = subprocess.Popen(["frog-twin", *map(str, args)], env=ros_domain.env, stdout=fh,
@@ -384,7 +386,7 @@ def test_killed_tracker_is_restarted_and_the_run_goes_on(sig, video, library, la
                 probe.spin_until(lambda: log.read_text().count("supervisor: tracker_node restarted") >= 2
                                  or proc.poll() is not None, 90, "the second restart")
                 assert proc.poll() is None, log.read_text()[-3000:]
-            # the restarted tracker tracks (more than the 2 s tag-lost timeout after the kill on a loaded
+            # the restarted tracker tracks (more than the 5 s tag-lost timeout after the kill on a loaded
             # machine: its downtime is not the tag lost), and the planner follows on its poses
             probe.spin_until(lambda: len([t for t in poses if t > t_kill]) >= 5 or proc.poll() is not None,
                              90, "poses from the restarted tracker")

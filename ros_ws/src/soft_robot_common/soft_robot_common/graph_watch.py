@@ -16,7 +16,7 @@ from .tool_signals import rclpy_call
 # Cheap requests with no side effect beyond an idempotent set: safe to re-send. (Kinematics
 # queries are not re-sent: a solve can take seconds on a loaded machine, and IK warm-starts.)
 IDEMPOTENT_SERVICES = {"ListParameters", "DescribeParameters", "GetParameters", "GetParameterTypes",
-                       "SetParameters"}
+                       "SetParameters", "ForwardKinematics"}     # FK: a pure query of the finger's model
 
 
 class GraphWatch:
