@@ -10,12 +10,13 @@ def test_a_repeated_frame_is_frozen_from_the_nth_copy_and_a_change_ends_it(camer
     frame = TankRenderer(camera, camera_pose, RenderSettings(noise_sigma=2.0)).render(np.array([0.0, 0.0, 0.3]))
     d = FrozenFrameDetector(3)
     # the same bytes in new buffers (a driver republishing its last image)
-    got = [d.check(bytes(frame.tobytes())) for _ in range(6)]
-    assert got == [False, False, True, True, True, True]
+    got = [(d.check(bytes(frame.tobytes())), d.repeated) for _ in range(6)]
+    # every copy is a repeat (never posed); frozen (warned about) from the third
+    assert got == [(False, False), (False, True)] + [(True, True)] * 4
     assert d.run == 6 and d.frozen_total == 4
     changed = frame.copy()
     changed[240, 320, 1] ^= 1                       # one bit of one pixel
-    assert d.check(changed) is False and d.run == 1 and not d.frozen
+    assert d.check(changed) is False and d.run == 1 and not d.frozen and not d.repeated
     assert d.check(changed) is False and d.check(changed) is True
 
 

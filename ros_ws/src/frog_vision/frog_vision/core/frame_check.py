@@ -27,6 +27,8 @@ class FrozenFrameDetector:
     >>> d = FrozenFrameDetector(3)
     >>> [d.check(b) for b in (b"a", b"a", b"a", b"a", b"b")]
     [False, False, True, True, False]
+    >>> [(d.check(b), d.repeated) for b in (b"c", b"c")]
+    [(False, False), (False, True)]
     """
 
     def __init__(self, frozen_frames: int = 3):
@@ -36,6 +38,13 @@ class FrozenFrameDetector:
         self._last: tuple[int, int] | None = None
         self.run = 0            # identical frames in a row, the newest included (0 before the first)
         self.frozen_total = 0   # frames judged frozen so far
+
+    @property
+    def repeated(self) -> bool:
+        """True when the newest frame is a copy of the one before (``run`` >= 2): it holds no new
+        observation, frozen verdict or not, and a pose from it would carry old content at a fresh
+        stamp (under load the copy can come a second after the picture was taken)."""
+        return self.run >= 2
 
     @property
     def frozen(self) -> bool:

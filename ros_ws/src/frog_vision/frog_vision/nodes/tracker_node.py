@@ -11,9 +11,10 @@ stale poses) and the diagnostics say so.
 
 Frozen camera: a driver that hangs may repeat its last image with fresh stamps, while a real
 sensor (and camera_sim, whose frames carry noise) never delivers two byte-identical frames.
-From the ``frozen_frames``-th identical frame in a row (a CRC-32 of the bytes,
-:mod:`frog_vision.core.frame_check`) nothing is published from them (pose, odometry, tf),
-a warning is logged once and the diagnostics report ERROR "camera frozen"; tracking resumes
+No copy of the previous frame is ever posed (a CRC-32 of the bytes,
+:mod:`frog_vision.core.frame_check`; diagnostics ``repeated_frames_skipped``); from the
+``frozen_frames``-th identical frame in a row a warning is logged once and the diagnostics
+report ERROR "camera frozen" (nothing is published: pose, odometry, tf); tracking resumes
 with the first frame that differs. A frame whose stamp does not advance past the previous
 frame's is refused.
 
@@ -130,6 +131,7 @@ class TrackerNode(Node):
         self.frames = self.dropped = self.bad_frames = 0
         self.frozen = FrozenFrameDetector(p["frozen_frames"])
         self._frozen_from, self._frozen_refused = "", 0     # state before a freeze; frames refused in it
+        self.repeated_skipped = 0     # copies of the previous frame, before a frozen verdict: not posed
         self.last_stamp = None
         self.period = None
         self.state_name = "waiting for images"
@@ -237,6 +239,11 @@ class TrackerNode(Node):
                 self.publish_diagnostics()
             self._frozen_refused += 1
             return
+        if self.frozen.repeated:
+            # a copy before the frozen verdict: no new observation, and its pose would be stale content at
+            # a fresh stamp (the twin fired a kick on one under load, docs/faults.md); dropped, counted
+            self.repeated_skipped += 1
+            return
         if self.state_name == "frozen":
             self.get_logger().info(f"camera frames change again after {self._frozen_refused} frozen frame(s): "
                                    f"tracking resumes")
@@ -327,6 +334,7 @@ class TrackerNode(Node):
                          KeyValue(key="bad_frames", value=str(self.bad_frames)),
                          KeyValue(key="frozen", value=str(self.state_name == "frozen").lower()),
                          KeyValue(key="frozen_frames_refused", value=str(self.frozen.frozen_total)),
+                         KeyValue(key="repeated_frames_skipped", value=str(self.repeated_skipped)),
                          KeyValue(key="reprojection_error_px", value=f"{np.median(res):.3f}" if res else "nan"),
                          KeyValue(key="last_error", value=self.last_error)]
         msg = DiagnosticArray(status=[status])
