@@ -73,10 +73,18 @@ def test_recoverable_faults_complete_the_path_with_nothing_fired_on_stale_state(
     tracker_back = max((pf["end_s"] + 15 + extra for pf in rep["per_fault"]
                         if pf["fault"].startswith(("kill:tracker", "sigstop:tracker"))), default=-math.inf)
 
-    def bound(pf):
+    def own(pf):
         return 15 + extra * (pf["end_s"] < tracker_back)
-    assert all(pf["recovery_s"] is not None and pf["recovery_s"] < bound(pf) for pf in rep["per_fault"]), \
-        rep["per_fault"]
+    # a fault not yet recovered from when the next one starts recovers with it (session 30: the tracker
+    # killed at 3 s was back, but the planner killed at 9 s followed again only at 18.8 s)
+    starts = [f.at for f in faults]
+    limits = [p["end_s"] + own(p) for p in rep["per_fault"]]
+    for i in range(len(limits) - 2, -1, -1):
+        pf = rep["per_fault"][i]
+        if pf["recovery_s"] is not None and pf["end_s"] + pf["recovery_s"] > starts[i + 1]:
+            limits[i] = max(limits[i], limits[i + 1])
+    assert all(pf["recovery_s"] is not None and pf["end_s"] + pf["recovery_s"] < limit
+               for pf, limit in zip(rep["per_fault"], limits)), (rep["per_fault"], limits)
     assert m["unclean_stops"] == [], m["unclean_stops"]
     if cls == "process":
         restarts = m["supervision"]["restarts"]
@@ -113,8 +121,9 @@ def test_a_dead_tracker_stops_the_run_cleanly_after_the_stuck_timeout(small_libr
 
 
 def test_the_stale_state_check_catches_a_planner_deciding_on_a_frozen_camera(small_library, tmp_path):
-    """The negative control: with the frozen-camera detection and the planner's stale bound both
-    switched off, the frog is kicked on an 8 s old picture, and the campaign's check says so."""
+    """The negative control: with the frozen-camera verdict and the planner's stale bound both
+    switched off, the frog is kicked on an 8 s old picture (the tracker poses no copy of a frame,
+    so the planner decides on the last pose before the freeze), and the campaign's check says so."""
     m, stdout, _ = _run(small_library, tmp_path, "camera_freeze@3+8",
                         "--node-param", "tracker_node:frozen_frames=1000",
                         "--node-param", "planner_node:stale_periods=100.0")
