@@ -13,10 +13,11 @@ from typing import Callable, Iterable
 
 from .tool_signals import rclpy_call
 
-# Cheap requests with no side effect beyond an idempotent set: safe to re-send. (Kinematics
-# queries are not re-sent: a solve can take seconds on a loaded machine, and IK warm-starts.)
+# Requests with no side effect beyond an idempotent set: safe to re-send. ForwardKinematics is a
+# pure query of the finger's model (a re-send costs one more solve); SolveIk is not re-sent: it
+# warm-starts from the last solve, so a second one would not answer the same question.
 IDEMPOTENT_SERVICES = {"ListParameters", "DescribeParameters", "GetParameters", "GetParameterTypes",
-                       "SetParameters", "ForwardKinematics"}     # FK: a pure query of the finger's model
+                       "SetParameters", "ForwardKinematics"}
 
 
 class GraphWatch:
