@@ -14,7 +14,7 @@ from __future__ import annotations
 import signal
 import time
 
-from frog_twin.core.faults import Observed, restart_windows
+from frog_twin.core.faults import Observed, Resubscription, restart_windows
 
 #: simulated s after a node's restart in which the recorder may not yet have matched its publishers
 DISCOVERY_S = 3.0
@@ -51,6 +51,7 @@ class RunObserver:
         self.recorder_up = []           # [(sim t0, sim t1)] with the recorder subscribed to CHECKED_TOPICS
         self.restarts = []              # sim times of node restarts (see discovery_gaps)
         self.planner_restarts = []      # sim times of planner_node's restarts
+        self.resubscription = Resubscription(CHECKED_TOPICS)    # a restarted recorder's own subscriptions
         self._up_since = None
         # deep: the checks need every message, and a reliable keep-last reader still drops the oldest
         # when its owner does not take them for a while (100 odometry messages are 3.3 s at 30 Hz). A
@@ -128,11 +129,25 @@ class RunObserver:
             self.restarts.append(self.sim_now)
             if name == "planner_node":
                 self.planner_restarts.append(self.sim_now)
+            if name == "recorder":
+                self.resubscription.restarted(self.sim_now)
 
     def discovery_gaps(self) -> dict:
         """{topic: [(t0, t1)]}: from each restart to DISCOVERY_S after the first message seen on the topic
-        after it (a restarted publisher is matched by the recorder only after discovery)."""
-        return {topic: restart_windows(self.restarts, stamps, DISCOVERY_S) for topic, stamps in self.seen.items()}
+        after it (a restarted publisher is matched by the recorder only after discovery), and from
+        each restart of the recorder to DISCOVERY_S after its new subscription to the topic."""
+        own = self.resubscription.gaps(DISCOVERY_S)
+        return {topic: restart_windows(self.restarts, stamps, DISCOVERY_S) + own[topic]
+                for topic, stamps in self.seen.items()}
+
+    def watch_recorder_subscriptions(self) -> None:
+        """Called every poll: the recorder's subscription endpoints on the checked topics (graph)."""
+        if self.sim_now is None:
+            return
+        for topic in CHECKED_TOPICS:
+            gids = [tuple(i.endpoint_gid) for i in self.node.get_subscriptions_info_by_topic(topic)
+                    if i.node_name == "recorder"]
+            self.resubscription.seen(self.sim_now, topic, gids)
 
     def odom_blind(self, witness_odom=()) -> list:
         """[(t0, t1)]: from each node restart to DISCOVERY_S after the first odometry this node or

@@ -368,6 +368,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
                     break
             observer.watch_recorder("recorder" in supervisor.names() and not supervisor.down("recorder")
                                     and watch.subscribed("recorder", PLANNER_TOPICS))
+            observer.watch_recorder_subscriptions()
             if watch.state == watch.Status.STATE_GOAL_REACHED:
                 goal = True
                 break

@@ -6,7 +6,7 @@ from dataclasses import replace
 import pytest
 
 from frog_twin.core.faults import (
-    CAMPAIGN_FAULTS, FAULT_CLASSES, Fault, FaultSpecError, Observed, campaign_plan, check_against_graph,
+    CAMPAIGN_FAULTS, FAULT_CLASSES, Fault, FaultSpecError, Observed, Resubscription, campaign_plan, check_against_graph,
     content_time, fault_end, fault_report, outcome, parse_faults, recorder_losses, recovery_time, restart_windows,
     stale_firings)
 
@@ -216,6 +216,33 @@ def test_restart_windows_end_a_discovery_after_the_first_message_after_each_rest
     assert restart_windows([2.0, 10.0], [1.0, 2.5, 12.0], 3.0) == [(2.0, 5.5), (10.0, 15.0)]
     assert restart_windows([5.0], [1.0, 4.9], 3.0) == [(5.0, math.inf)]     # nothing after it: blind to the end
     assert restart_windows([], [1.0], 3.0) == []
+
+
+def test_a_restarted_recorder_is_down_on_a_topic_until_a_new_subscription_of_it_appears():
+    """Session 31's series: the recorder restarted at 12.46 s subscribed to /frog/bridge/sent only
+    after 17.164 s, when a message had been sent there; the window after the first message since the
+    restart (restart_windows) had ended at 15.9 s, and the report called that message lost."""
+    topics = ("/p", "/s")
+    r = Resubscription(topics)
+    r.seen(3.0, "/p", [(1,)])                   # the first recorder's endpoints
+    r.seen(3.0, "/s", [(2,)])
+    r.restarted(12.46)
+    r.seen(12.6, "/p", [(1,)])                  # the killed recorder's endpoint, until its lease ends
+    r.seen(12.6, "/s", [(2,)])
+    r.restarted(13.0)                           # killed again before it subscribed: the first restart counts
+    r.seen(16.0, "/p", [(1,), (3,)])            # the new one's, beside the stale one
+    r.seen(17.5, "/s", [(4,)])
+    r.seen(18.0, "/s", [(4,)])                  # no new endpoint: nothing changes
+    assert r.gaps(3.0) == {"/p": [(12.46, 19.0)], "/s": [(12.46, 20.5)]}
+    seen = {"/s": [12.88, 14.3, 17.164, 21.0, 24.0]}
+    recorded = {"/s": [21.0]}
+    excluded = r.gaps(3.0)
+    assert recorder_losses(seen, recorded, [(3.0, 36.8)], excluded=excluded)["/s"]["first_lost"] == [24.0]
+    # the old window alone would have called 17.164 lost
+    old = {"/s": restart_windows([12.46], seen["/s"], 3.0)}
+    assert 17.164 in recorder_losses(seen, recorded, [(3.0, 36.8)], excluded=old)["/s"]["first_lost"]
+    r.restarted(30.0)                           # never subscribed again: down to the end
+    assert r.gaps(3.0)["/p"][-1] == (30.0, math.inf)
 
 
 def test_a_pose_no_witness_saw_after_a_tracker_restart_is_unverified_only_as_the_planner_reports_it():

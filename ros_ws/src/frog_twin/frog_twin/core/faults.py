@@ -208,6 +208,40 @@ def restart_windows(restarts, stamps, discovery: float) -> list:
     return out
 
 
+class Resubscription:
+    """Per topic, how long a restarted subscriber (the recorder) had not subscribed again.
+
+    A restarted recorder records a topic only once it has found it in the graph and subscribed,
+    seconds after its start under load (a series run: 2.4 s wall after its first log line, 5 s
+    simulated after the restart). Only an endpoint the graph did not show before counts: a
+    SIGKILLed recorder's subscriptions stay in the graph until their lease ends.
+    """
+
+    def __init__(self, topics):
+        self.known = {t: set() for t in topics}     # endpoint gids seen on each topic
+        self.waiting = {}                           # topic: restart time, no new subscription yet
+        self.windows = {t: [] for t in topics}      # topic: [(restart, new subscription seen)]
+
+    def restarted(self, t: float) -> None:
+        for topic in self.known:
+            self.waiting.setdefault(topic, t)       # restarted again before subscribing: the first
+
+    def seen(self, t: float, topic: str, gids) -> None:
+        """The graph at ``t`` shows the subscriber's endpoints ``gids`` (hashable) on ``topic``."""
+        new = set(gids) - self.known[topic]
+        self.known[topic] |= new
+        if new and topic in self.waiting:
+            self.windows[topic].append((self.waiting.pop(topic), t))
+
+    def gaps(self, discovery: float) -> dict:
+        """{topic: [(t0, t1)]}: from each restart to ``discovery`` s after the new subscription
+        appeared (its publishers match it after their own discovery); inf while it has not."""
+        out = {t: [(a, b + discovery) for a, b in w] for t, w in self.windows.items()}
+        for topic, t0 in self.waiting.items():
+            out[topic].append((t0, float("inf")))
+        return out
+
+
 def content_time(stamp: float, faults) -> float:
     """When the information behind an odometry stamped ``stamp`` was seen by the camera.
 
