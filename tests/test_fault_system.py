@@ -305,26 +305,33 @@ def test_a_deaf_recorder_is_killed_and_restarted_into_a_new_file(small_library, 
                                            "--faults", "ble_loss@30+1")
     events = m["supervision"]["events"]
     hung = [e for e in events if e["what"] == "hung" and e["node"] == "recorder"]
-    assert hung and all(e["detail"].startswith("deaf: nothing recorded on /frog/") for e in hung), events
+    # a restarted one is killed again if it is deaf too, or never subscribes (its ready pattern)
+    deaf_kills = [e for e in hung if e["detail"].startswith("deaf: nothing recorded on /frog/")]
+    assert hung and hung[0] in deaf_kills and all(e in deaf_kills or e["detail"].startswith("no ")
+                                                  for e in hung), events
     # silent since its last diagnostics (1 Hz, up to 1 s before the stop): not before the bound, and soon after
     assert 6.0 - 1.5 <= hung[0]["time"] - t_stop < 6.0 + 5.0, (hung[0]["time"] - t_stop, events)
-    assert m["supervision"]["restarts"]["recorder"] == len(hung) and m["goal_reached"], (events, m["stop_reason"])
+    # every kill restarted, or the last one's restart still due when the goal was reached
+    pending = [e["what"] for e in events if e["node"] == "recorder"][-1] == "exited"
+    restarts = m["supervision"]["restarts"]["recorder"]
+    assert restarts == len(hung) - pending, events
+    assert m["goal_reached"], (events, m["stop_reason"])
     if len(hung) > 1:    # the restarted recorder met the restarted-reader wedge: killed and restarted again
         warnings.warn(f"{len(hung) - 1} restarted recorder(s) recorded nothing and were restarted again "
                       f"(docs/faults.md)")
     rep = m["faults"]
     assert rep["outcome"] == "completed" and rep["recorder_lost"] == 0, (rep["recorder"], rep["recorder_deaf"])
     deaf = rep["recorder_deaf"]
-    assert len(deaf) == len(hung) and all(topic.startswith("/frog/") and 0.0 < t0 < t1 for t0, t1, topic in deaf)
+    assert len(deaf) == len(deaf_kills) and all(topic.startswith("/frog/") and 0.0 < t0 < t1 for t0, t1, topic in deaf)
     assert deaf[0][1] - deaf[0][0] >= 4.5 and rep["recorder_deaf_missed"] >= 3, (deaf, rep["recorder_deaf_missed"])
     # the stopped recorder's file (recovered) and each restarted one's: the last holds the run's end
     names = sorted(f.name for f in (out / "ellipse" / "recording").glob("*.mcap"))
-    assert names == [f"ellipse_{k:03d}.mcap" for k in range(len(hung) + 1)], names
+    assert names == [f"ellipse_{k:03d}.mcap" for k in range(restarts + 1)], names
     assert any(Path(f).parent.name == "recovered" for f in m["recording"]), m["recording"]
     # up, deaf (not up), up again: each start opens an up interval (empty for a restart deaf from its start),
     # in order, none overlapping; a graph query that misses a subscription for a poll splits one (seen)
     up = rep["recorder_up"]
-    assert len(up) >= len(hung) + 1 and all(a <= b for a, b in up) \
+    assert len(up) >= restarts + 1 and all(a <= b for a, b in up) \
         and all(end <= start for (_, end), (start, _) in zip(up, up[1:])), up
 
 

@@ -182,7 +182,11 @@ ESSENTIAL_NODES = ("sim_node", "robot_emulator")
 # A restarted tracker that has no camera model within this is hung (about 1 restart in 10 under
 # load never gets a camera topic, docs/faults.md): the supervisor kills and restarts it again.
 # The timeout holds in real mode too (its own ready pattern: frog_twin.real).
-RESTART_READY = {"tracker_node": "camera model from camera_info"}
+# A restarted recorder is ready once it has subscribed to the planner's topics (its log says so; the
+# graph still shows a killed recorder's subscriptions until their lease ends): until then it is not
+# deaf (session 31: one under load took 5 s to subscribe and was killed for deaf 3.5 s after).
+RESTART_READY = {"tracker_node": "camera model from camera_info",
+                 "recorder": r"(?s)\A(?=.*recording /frog/primitive \[)(?=.*recording /frog/planner/status \[)"}
 RESTART_READY_TIMEOUT_S = 15.0
 #: The planner starts only once rollout_node serves (transitions simulator): a run started before
 #: made every decision a library fallback while numba compiled the rollouts (about a minute, once).
@@ -462,13 +466,14 @@ def _check_recorder_records(rw: RecorderWatch, observer: RunObserver, supervisor
                             injector: FaultInjector, subscribed: bool) -> None:
     """Kill a running recorder that records nothing on a checked topic while this node sees it
     published (frog_twin.core.liveness); the supervisor restarts it into a new file. Excused while
-    it or any node is down or restarting, it is SIGSTOPped by the injector, or not yet subscribed."""
+    it or any node is down or restarting, it is SIGSTOPped by the injector, or not yet subscribed
+    (on one topic: a restarted recorder with no new subscription to it in the graph)."""
     now = time.monotonic()
     rw.published(now, observer.seen_counts())
     # a restarted publisher is matched by each subscriber after its own discovery: excused too
     excused = supervisor.down("recorder") or bool(supervisor.recovering()) or "recorder" in injector.held \
         or not subscribed
-    deaf = rw.deaf_for(now, excused)
+    deaf = rw.deaf_for(now, excused, excused_topics=observer.resubscription.waiting)
     if deaf is not None:
         topic, silent, published = deaf
         observer.recorder_went_deaf(topic, rw.heard_at[topic])

@@ -210,3 +210,32 @@ def test_a_new_recorder_process_that_records_nothing_has_heard_nothing():
     assert w.heard_at[TOPICS[0]] == 17.0
     w.recorded(9.3, 19.0, {TOPICS[0]: 1})          # restarted again, and it recorded one already
     assert w.heard_at[TOPICS[0]] == 19.0
+
+
+def test_a_topic_the_restarted_recorder_has_not_subscribed_to_yet_is_not_deaf_until_it_has():
+    """Session 31: a restarted recorder subscribed to /frog/primitive 5 s after its restart; the graph
+    still showed the killed one's subscription, so the wait had started at the restart and the new
+    recorder was killed for deaf 3.5 s after it subscribed. Excused on that topic, its wait starts at
+    the subscription: with nothing recorded it is deaf a bound after that, not before."""
+    w = RecorderWatch(TOPICS, 6.0)
+    subscribed_at = 12
+    found = None
+    for t in range(40):
+        decisions = int(t / 1.43)
+        w.published(t, {TOPICS[0]: decisions})
+        w.recorded(t + 0.3, float(t), {TOPICS[0]: 0})     # a new process that records nothing
+        d = w.deaf_for(t + 0.5, False, excused_topics={TOPICS[0]} if t < subscribed_at else set())
+        if d is not None:
+            found = (t + 0.5, d)
+            break
+    assert found is not None and found[1][0] == TOPICS[0]
+    # the last excused poll (11.5 s) starts the wait
+    assert subscribed_at - 0.5 + 6.0 <= found[0] < subscribed_at + 8.0, found
+    # not excused: the same recorder is deaf 6 s after the start of the watch
+    w = RecorderWatch(TOPICS, 6.0)
+    for t in range(40):
+        w.published(t, {TOPICS[0]: int(t / 1.43)})
+        w.recorded(t + 0.3, float(t), {TOPICS[0]: 0})
+        if w.deaf_for(t + 0.5, False) is not None:
+            assert t + 0.5 < subscribed_at
+            break

@@ -121,9 +121,10 @@ class Supervisor:
 
     def unclean_stops(self) -> list[str]:
         """Nodes whose last process did not end by SIGINT with code 0 at the run's stop (released nodes,
-        and nodes whose exit ended the run, named in :attr:`stop_reason`, excepted)."""
+        nodes whose exit ended the run, named in :attr:`stop_reason`, and nodes waiting for their
+        restart, whose process ended before the stop as an event says, excepted)."""
         return [s.name for s in self._slots.values()
-                if not (s.released or s.ended_run) and not s.process.stopped_cleanly]
+                if not (s.released or s.ended_run or s.due is not None) and not s.process.stopped_cleanly]
 
     def names(self) -> list[str]:
         return list(self._slots)

@@ -69,6 +69,24 @@ def test_essential_node_is_not_restarted(tmp_path):
     assert sup.unclean_stops() == ["other"], "exit 3 on SIGINT is unclean; the world's exit is the stop reason"
 
 
+def test_a_node_waiting_for_its_restart_at_the_stop_is_not_an_unclean_stop(tmp_path):
+    """Session 31: a recorder killed as deaf 2 s before the goal, its restart due in 4 s, made the run
+    'failed' for an unclean stop; its process had ended before the stop, and the event says why."""
+    sup = Supervisor(RestartPolicy(backoff_s=30.0, backoff_max_s=30.0), log=lambda s: None)
+    sup.add("rec", _sleeper(tmp_path, "rec"), lambda label: _sleeper(tmp_path, label))
+    sup.add("bad", _sleeper(tmp_path, "bad"), lambda label: _sleeper(tmp_path, label))
+    try:
+        sup.kill_hung("rec", "deaf")
+        os.kill(sup.process("bad").pid, signal.SIGKILL)
+        _poll_until(sup, lambda: sum(e.what == "exited" for e in sup.events) == 2)
+        assert sup.recovering() == ["rec", "bad"] and sup.stop_reason is None
+    finally:
+        sup.stop_all(warn=lambda s: None)
+    assert sup.unclean_stops() == []
+    assert len(sup.processes()) == 2, "no restart at the stop"
+    # (a process that ends badly at the stop is still unclean: test_essential_node_is_not_restarted)
+
+
 def test_policy_rejects_nonsense():
     with pytest.raises(ValueError, match="max_restarts"):
         RestartPolicy(max_restarts=-1)

@@ -193,12 +193,13 @@ class RecorderWatch:
         for w in self._watches.values():
             w.restart(now)
 
-    def deaf_for(self, now: float, excused: bool) -> tuple[str, float, int] | None:
+    def deaf_for(self, now: float, excused: bool, excused_topics=()) -> tuple[str, float, int] | None:
         """(topic, seconds the recorder recorded nothing on it, messages published meanwhile) for
-        the first deaf topic, once that is at least ``bound_s``; else None."""
+        the first deaf topic, once that is at least ``bound_s``; else None. ``excused_topics``: the
+        running recorder has not subscribed to these yet (its wait on them starts when it has)."""
         found = None
         for t, w in self._watches.items():
-            silent = w.deaf_for(now, excused)
+            silent = w.deaf_for(now, excused or t in excused_topics)
             if silent is not None and found is None:
                 found = (t, silent, w.published)
         return found
