@@ -205,3 +205,39 @@ def test_paused_stalls_the_simulation_and_clock_then_continues(launch, probe):
 
 def _t(stamp):
     return stamp.sec + stamp.nanosec * 1e-9
+
+
+def test_a_stalled_process_continues_without_racing_to_catch_up(launch, probe):
+    """A sim_node process stopped for 2 s (as one blocked in the middleware's publish for 2.5 s after
+    another node was SIGKILLed, docs/faults.md): afterwards /clock goes on at the real-time factor
+    from where it stood, it does not race through the lost seconds; the lag is logged and counted."""
+    import os
+    import signal
+    import time
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rosgraph_msgs.msg import Clock
+    sim = launch("sim_node", params={"publish_clock": True, "gait_frequency_hz": 1.0, "max_lag_s": 0.5})
+    clock, diags = [], []
+    probe.node.create_subscription(Clock, "/clock", lambda m: clock.append((time.monotonic(), _t(m.clock))), 100)
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
+    probe.spin_until(lambda: clock and clock[-1][1] > 1.5, 120, "1.5 s of simulated time")
+    os.kill(sim.pid, signal.SIGSTOP)
+    try:
+        probe.spin_for(0.3)                     # what was under way arrives
+        stood = clock[-1][1]
+        time.sleep(2.0)
+    finally:
+        os.kill(sim.pid, signal.SIGCONT)
+    t_cont = time.monotonic()
+    probe.spin_until(lambda: clock[-1][0] > t_cont + 2.0, 20, "2 s of /clock after SIGCONT")
+    after = [(w - t_cont, t - stood) for w, t in clock if w > t_cont]
+    # in the first wall second: at most 1 simulated s and the catch-up bound (0.5 s); the old
+    # pacing put about 3.3 s there (2.3 s stood, caught up at once)
+    assert max(t for w, t in after if w <= 1.0) < 1.0 + 0.5 + 0.2, after[:20]
+    # and it does go on at about real time
+    assert 1.2 < max(t for w, t in after if w <= 2.0) < 2.0 + 0.5 + 0.2, after[-5:]
+    line = sim.wait_for_log(r"fell (\d+\.\d+) s behind the wall clock", timeout=10)
+    assert 1.8 < float(line.group(1)) < 3.0, line.group(0)
+    probe.spin_until(lambda: any(kv.key == "lags_dropped" and kv.value != "0"
+                                 for d in diags for s in d.status for kv in s.values), 5, "lags_dropped > 0")
+    assert sim.stop() == 0

@@ -10,7 +10,9 @@ With ``publish_clock`` it also publishes ``/clock`` (simulated time, monotonic a
 ``~/reset``) and stamps everything with it, so other nodes can run with ``use_sim_time``
 faster than real time; otherwise stamps come from the node's ROS clock (system time).
 ``paused`` (live; the fault injector's clock stall) stops the simulation, its messages and
-``/clock`` while true; it continues from the same time afterwards, without catching up.
+``/clock`` while true; it continues from the same time afterwards, without catching up. A lag
+longer than ``max_lag_s`` (the process starved or blocked) is not caught up either
+(:class:`frog_sim.core.pacing.Pacer`).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
 from frog_sim.core.model_parameters import FrogParameters
+from frog_sim.core.pacing import Pacer
 from frog_common.primitives import LIMB_NAMES, PRIMITIVE_NAMES
 from frog_sim.core.simulation import DEFAULT_TIME_STEP, ConvergenceError, FrogSimulation
 from frog_common.se2 import yaw_quaternion
@@ -41,6 +44,9 @@ from frog_common.se2 import yaw_quaternion
 _NODE_PARAMS = [
     Param("real_time_factor", 1.0, "simulated seconds per wall second; 0 = as fast as possible", min=0.0,
           max=1000.0, live=True),
+    Param("max_lag_s", 0.5, "wall seconds the simulation may fall behind real time and still catch up; a "
+          "longer lag (the process starved or blocked) is dropped and the world continues from where it is, "
+          "as a real one would, instead of racing; 0 = always catch up", min=0.0, max=60.0, live=True),
     Param("publish_clock", False, "publish /clock with the simulated time (for use_sim_time nodes); the "
           "stamps are then simulated time too"),
     Param("time_step", DEFAULT_TIME_STEP, "integrator time step dt [s]", min=1e-5, max=0.01),
@@ -140,8 +146,9 @@ class SimNode(Node):
         self.next_odom = 0.0
         self.next_shape = 0.0
         self.error: str | None = None
-        self.wall_start = time.monotonic()
-        self.sim_start = self.sim.time
+        self.pacer = Pacer(p["real_time_factor"], p["max_lag_s"])
+        self.pacer.anchor(time.monotonic(), self.sim.time)
+        self._lag_logged = -math.inf       # wall time of the last lag warning (one per 10 s at most)
         self.steps_total = 0
         self.step_wall_s = 0.0
         self.create_timer(0.01, self.tick)
@@ -160,26 +167,36 @@ class SimNode(Node):
                                        f"messages or /clock until paused is false")
             else:
                 self.get_logger().info(f"resumed at simulated time {self.world_time:.3f} s")
+        self.pacer.rtf, self.pacer.max_lag_s = self.cfg["real_time_factor"], self.cfg["max_lag_s"]
         if "real_time_factor" in changed or "paused" in changed:
             # re-anchor the pacing so the new rate applies from now on, without a jump (and the
             # diagnostics' real-time factors, which are measured since the anchor)
-            self.wall_start, self.sim_start = time.monotonic(), self.sim.time
+            self.pacer.anchor(time.monotonic(), self.sim.time)
             self.step_wall_s = 0.0
 
     # -- simulation loop -----------------------------------------------------------------
     def _target_time(self) -> float:
-        rtf = self.cfg["real_time_factor"]
-        if rtf == 0:
-            return math.inf
-        return self.sim_start + (time.monotonic() - self.wall_start) * rtf
+        target, dropped = self.pacer.target(time.monotonic(), self.sim.time)
+        if dropped > 0:
+            now = time.monotonic()
+            if now - self._lag_logged >= 10.0:
+                self._lag_logged = now
+                self.get_logger().warning(
+                    f"fell {dropped / self.pacer.rtf:.2f} s behind the wall clock at simulated time "
+                    f"{self.world_time:.3f} s (the process was starved or blocked): continuing from there "
+                    f"without catching up ({self.pacer.drops} lag(s) dropped, {self.pacer.dropped_total_s:.2f} "
+                    f"simulated s in all; max_lag_s {self.pacer.max_lag_s:g})")
+        return target
 
     def tick(self) -> None:
         if self.error is not None or self.cfg["paused"]:
             return
         end = self.cfg["duration_s"] or math.inf
+        dt = self.sim.time_step
+        if self.sim.time + 0.5 * dt >= end:     # done: no pacing (and no lag) any more
+            return
         target = min(self._target_time(), end)
         budget_end = time.monotonic() + 0.05   # keep callbacks (commands) responsive
-        dt = self.sim.time_step
         while self.sim.time + 0.5 * dt < target and time.monotonic() < budget_end:
             # advance to the next publication time, at most to the target
             next_pub = min(self.next_odom, self.next_shape, target)
@@ -314,7 +331,7 @@ class SimNode(Node):
                               duration=p["gait_duration_s"] or None)
         self.error = None
         self.next_odom = self.next_shape = 0.0
-        self.wall_start, self.sim_start = time.monotonic(), self.sim.time
+        self.pacer.anchor(time.monotonic(), self.sim.time)
         self.step_wall_s = 0.0
         self.publish_state(force=True)
         response.success, response.message = True, "simulation reset to the initial pose"
@@ -322,8 +339,8 @@ class SimNode(Node):
         return response
 
     def publish_diagnostics(self) -> None:
-        wall = time.monotonic() - self.wall_start
-        sim_elapsed = self.sim.time - self.sim_start
+        achieved = self.pacer.achieved_rtf(time.monotonic(), self.sim.time)
+        sim_elapsed = self.sim.time - self.pacer.sim_start
         status = DiagnosticStatus(
             name=f"{self.get_name()}: simulation", hardware_id="frog_sim",
             level=DiagnosticStatus.ERROR if self.error else DiagnosticStatus.WARN if self.cfg["paused"] else
@@ -334,10 +351,12 @@ class SimNode(Node):
         status.values = [
             KeyValue(key="sim_time_s", value=f"{self.sim.time:.3f}"),
             KeyValue(key="achieved_real_time_factor",
-                     value=f"{sim_elapsed / wall:.2f}" if wall > 0 else "nan"),
+                     value=f"{achieved:.2f}"),
             KeyValue(key="compute_real_time_factor",
                      value=f"{1 / cost:.1f}" if cost > 0 else "nan"),
             KeyValue(key="steps", value=str(self.steps_total)),
+            KeyValue(key="lags_dropped", value=str(self.pacer.drops)),
+            KeyValue(key="lag_dropped_s", value=f"{self.pacer.dropped_total_s:.3f}"),
             KeyValue(key="paused", value=str(self.cfg["paused"]).lower()),
         ]
         msg = DiagnosticArray(status=[status])
