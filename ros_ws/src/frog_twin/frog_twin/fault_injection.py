@@ -43,6 +43,7 @@ class RunObserver:
         self.deaf = deaf                # a frog_twin.core.liveness.DeafWatch fed from /diagnostics, or None
         self.recorder_watch = recorder_watch    # a frog_twin.core.liveness.RecorderWatch, or None
         self.recorder_deaf = []         # [(sim t0, sim t1, topic)]: the recorder alive, recording nothing on topic
+        self.recorder_unready = []      # [(sim t0, sim t1)]: a restarted recorder that never got ready
         self.obs = Observed()
         self.seen = {t: [] for t in CHECKED_TOPICS}
         self.sim_now = None
@@ -53,6 +54,7 @@ class RunObserver:
         self.planner_restarts = []      # sim times of planner_node's restarts
         self.resubscription = Resubscription(CHECKED_TOPICS)    # a restarted recorder's own subscriptions
         self._up_since = None
+        self._unready_since = None      # sim time of the recorder's restart, until it is ready
         # deep: the checks need every message, and a reliable keep-last reader still drops the oldest
         # when its owner does not take them for a while (100 odometry messages are 3.3 s at 30 Hz). A
         # CI run's watch had no odometry for 5 s while the planner went on deciding on fresh poses,
@@ -130,7 +132,14 @@ class RunObserver:
             if name == "planner_node":
                 self.planner_restarts.append(self.sim_now)
             if name == "recorder":
+                self._close_unready()        # its predecessor was killed or exited before it got ready
+                self._unready_since = self.sim_now
                 self.resubscription.restarted(self.sim_now)
+
+    def _close_unready(self) -> None:
+        if self._unready_since is not None and self.sim_now is not None:
+            self.recorder_unready.append((self._unready_since, self.sim_now))
+        self._unready_since = None
 
     def discovery_gaps(self) -> dict:
         """{topic: [(t0, t1)]}: from each restart to DISCOVERY_S after the first message seen on the topic
@@ -160,10 +169,17 @@ class RunObserver:
         (until then this node may not have matched the new planner's publisher)."""
         return restart_windows(self.planner_restarts, [t for t, _ in self.obs.decisions], DISCOVERY_S)
 
-    def watch_recorder(self, subscribed: bool) -> None:
-        """Called every poll with whether the recorder is subscribed to every checked topic."""
+    def watch_recorder(self, subscribed: bool, ready: bool = True) -> None:
+        """Called every poll with whether the recorder is subscribed to every checked topic, and whether
+        it is ready (a restarted one: its log says it subscribed to the planner's topics). Up needs both:
+        the graph still shows a killed recorder's subscriptions until their lease ends, and a restarted
+        recorder that met the restarted-reader wedge may be subscribed to a topic and receive nothing on it
+        (session 33's series) while it is not watched for deafness (it is recovering)."""
         if self.sim_now is None:
             return
+        subscribed = subscribed and ready
+        if subscribed:
+            self._unready_since = None
         if subscribed and self._up_since is None:
             self._up_since = self.sim_now
         elif not subscribed and self._up_since is not None:
@@ -171,6 +187,7 @@ class RunObserver:
             self._up_since = None
 
     def close_recorder_interval(self, recorder_running: bool) -> None:
+        self._close_unready()
         if self._up_since is not None and recorder_running:
             self.recorder_up.append((self._up_since, self.sim_now))
         self._up_since = None

@@ -371,7 +371,8 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
                                    f"(wall) with nothing pausing it (sim_node blocked?)")
                     break
             observer.watch_recorder("recorder" in supervisor.names() and not supervisor.down("recorder")
-                                    and watch.subscribed("recorder", PLANNER_TOPICS))
+                                    and watch.subscribed("recorder", PLANNER_TOPICS),
+                                    ready="recorder" not in supervisor.recovering())
             observer.watch_recorder_subscriptions()
             if watch.state == watch.Status.STATE_GOAL_REACHED:
                 goal = True

@@ -423,6 +423,7 @@ def fault_report(faults, observer, sim_start: float, injector, recorded: dict, p
     gaps = observer.discovery_gaps()
     losses = recorder_losses(observer.seen, recorded, observer.recorder_up, excluded=gaps)
     deaf = getattr(observer, "recorder_deaf", ())
+    unready = getattr(observer, "recorder_unready", ())
     lost = sum(v["lost"] for v in losses.values())
     per_fault = []
     for f, g in zip(faults, shifted):
@@ -438,10 +439,12 @@ def fault_report(faults, observer, sim_start: float, injector, recorded: dict, p
             "last_firing_s": max(obs.fired) - sim_start if obs.fired else None,
             "command_bound_s": command_bound, "recorder": losses, "recorder_lost": lost,
             "recorder_up": observer.recorder_up, "discovery_gaps": gaps, "per_fault": per_fault,
-            # the recorder alive but recording nothing (killed and restarted): not up, so not checked;
+            # the recorder alive but recording nothing (killed and restarted), or restarted and never ready
+            # (killed as hung, or exited, before its log said it subscribed): not up, so not checked;
             # what it did not record meanwhile is said
             "recorder_deaf": [(t0 - sim_start, t1 - sim_start, topic) for t0, t1, topic in deaf],
+            "recorder_unready": [(t0 - sim_start, t1 - sim_start) for t0, t1 in unready],
             "recorder_deaf_missed": sum(v["lost"] for v in recorder_losses(
-                observer.seen, recorded, [(t0, t1) for t0, t1, _ in deaf], margin=0.0).values()),
+                observer.seen, recorded, [(t0, t1) for t0, t1, _ in deaf] + list(unready), margin=0.0).values()),
             "actions": [(t - sim_start, what) for t, _, what in injector.done],
             "injector_failures": injector.failures(), "unclean_stops": list(unclean)}
