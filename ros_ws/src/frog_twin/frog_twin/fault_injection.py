@@ -177,12 +177,12 @@ class RunObserver:
         (session 33's series) while it is not watched for deafness (it is recovering)."""
         if self.sim_now is None:
             return
-        subscribed = subscribed and ready
-        if subscribed:
+        up = subscribed and ready
+        if up:
             self._unready_since = None
-        if subscribed and self._up_since is None:
+        if up and self._up_since is None:
             self._up_since = self.sim_now
-        elif not subscribed and self._up_since is not None:
+        elif not up and self._up_since is not None:
             self.recorder_up.append((self._up_since, self.sim_now))
             self._up_since = None
 
