@@ -56,7 +56,7 @@ def _setup(launch, probe, library, **params):
     from soft_robot_interfaces.msg import PlannerStatus
     node = launch("planner_node", params={"library_file": str(library), "period": PERIOD, "path_type": "line",
                                           "odom_topic": "/test/odom", "transitions": "simulator",
-                                          "decision_deadline": DEADLINE, "stale_periods": 3.0, **params})
+                                          "decision_deadline": DEADLINE, "state_topic": "", **params})
     status, diags = [], []
     probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
     probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)

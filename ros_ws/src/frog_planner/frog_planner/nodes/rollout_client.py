@@ -9,8 +9,6 @@ the tree starts where the robot will be when it fires.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from geometry_msgs.msg import Pose2D, Twist
 
@@ -62,6 +60,19 @@ class RolloutClient:
         if future is not None and not future.done():
             self.client.remove_pending_request(future)
 
+    def result(self, future, reason, names, depth: int, reanchor: bool, deadline_periods: float):
+        """At the deadline: ``(expander, None)`` from a response that came in time, else ``(None, why not)``
+        (``reason``: why no request was sent). A request still pending is cancelled."""
+        if future is None:
+            return None, reason
+        if not future.done():
+            self.cancel(future)
+            return None, f"rollouts missed the deadline ({deadline_periods:.2f} periods)"
+        try:
+            return self.expander(future.result(), names, depth, reanchor)
+        except Exception as exc:           # noqa: BLE001 - a failed call is a fallback, not a crash
+            return None, f"rollout call failed: {exc}"
+
     @staticmethod
     def expander(response, names, depth: int, reanchor: bool = False):
         """The search's expander from a successful response, or (None, reason).
@@ -92,7 +103,3 @@ class RolloutClient:
         return (lambda pose, velocity, d: tree_from_rows(pose, rows, d, len(names))), None
 
 
-def lead_time(execute_at, pose_stamp) -> float:
-    """Seconds from the pose's capture stamp to the decision's execution (>= 0)."""
-    lead = (execute_at - pose_stamp).nanoseconds * 1e-9
-    return lead if math.isfinite(lead) and lead > 0 else 0.0
