@@ -1,0 +1,88 @@
+"""How old was the state behind each limb pulse? An audit of a recording, trusting no node.
+
+Every pulse the bridge writes is recorded on ``frog/bridge/sent``; every pose the tracker
+publishes on ``frog/odom``, and for each frame ``frog/tracker/state`` says whether that pose was
+measured or predicted. The audit takes, for each pulse, the newest *measured* pose published
+before it (by the middleware's publish times, which no node computes; the recorder's receive
+times as a second reading) and its age when the pulse was written. It also reads the age the
+bridge itself recorded (``LimbActivation.state_age``) and reports both: a pulse is on a stale
+state if either exceeds the bound. Without tracker states in the recording (odometry from the
+simulator), every odometry message is a measurement.
+
+Times are seconds on the recording machine's wall clock; with the twin faster than real time,
+``real_time_factor`` turns the wall ages into simulated ones (the bound is on the node clock).
+"""
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class PulseAges:
+    """The ages of the state behind each pulse [s], and the bound they were held to."""
+
+    bound_s: float
+    published: np.ndarray = field(default_factory=lambda: np.zeros(0))   # from publish times
+    received: np.ndarray = field(default_factory=lambda: np.zeros(0))    # from the recorder's receive times
+    claimed: np.ndarray = field(default_factory=lambda: np.zeros(0))     # the bridge's own state_age
+    times: np.ndarray = field(default_factory=lambda: np.zeros(0))       # each pulse's publish time
+
+    @property
+    def n(self) -> int:
+        return len(self.times)
+
+    def stale(self) -> list[dict]:
+        """Pulses on a state older than the bound by any reading: {t, published, received, claimed}."""
+        bad = (self.published > self.bound_s) | (self.claimed > self.bound_s)
+        return [{"t": float(self.times[i]), "published": float(self.published[i]),
+                 "received": float(self.received[i]), "claimed": float(self.claimed[i])} for i in np.flatnonzero(bad)]
+
+    def summary(self) -> dict:
+        def stat(a):
+            a = a[np.isfinite(a)]
+            return {"median": float(np.median(a)), "p99": float(np.quantile(a, 0.99)), "max": float(a.max())} \
+                if len(a) else None
+        return {"pulses": self.n, "bound_s": self.bound_s, "stale": len(self.stale()),
+                "published": stat(self.published), "received": stat(self.received), "claimed": stat(self.claimed)}
+
+
+def measured_poses(odom, states=None):
+    """The (publish time, receive time) of the odometry that was measured, in time order.
+
+    ``odom``: (header stamp, publish time, receive time) per frog/odom message; ``states``:
+    {header stamp: state stamp} of frog/tracker/state (None: every pose is measured). A pose
+    is measured when the tracker's state for its frame has the frame's own stamp; a pose
+    without a recorded state counts as predicted (not trusted as fresh).
+    """
+    rows = [(p, r) for stamp, p, r in odom
+            if states is None or abs(states.get(round(stamp, 6), -1.0) - stamp) < 1e-6]
+    return sorted(rows)
+
+
+def pulse_ages(pulses, measured, bound_s: float, real_time_factor: float = 1.0) -> PulseAges:
+    """Ages of the state behind each pulse.
+
+    ``pulses``: (publish time, receive time, claimed state age) per frog/bridge/sent message;
+    ``measured``: from :func:`measured_poses`. A pulse with no measured pose before it gets an
+    infinite age (it rests on nothing the audit can see).
+    """
+    pub = [p for p, _ in measured]
+    rec = sorted(r for _, r in measured)
+    out = PulseAges(bound_s)
+    rows = sorted(pulses)
+    if not rows:
+        return out
+    times, published, received, claimed = [], [], [], []
+    for p, r, claim in rows:
+        i = bisect.bisect_right(pub, p) - 1
+        j = bisect.bisect_right(rec, r) - 1
+        times.append(p)
+        published.append((p - pub[i]) * real_time_factor if i >= 0 else np.inf)
+        received.append((r - rec[j]) * real_time_factor if j >= 0 else np.inf)
+        claimed.append(claim)
+    out.times, out.published, out.received, out.claimed = (np.array(v, dtype=float) for v in
+                                                          (times, published, received, claimed))
+    return out
