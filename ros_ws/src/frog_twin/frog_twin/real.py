@@ -292,13 +292,13 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
     """
     from frog_twin.core.twin_recording import recordings
     from frog_twin.fault_injection import RunObserver
-    from frog_twin.supervised_run import SupervisedGraph, graph_liveness
+    from frog_twin.supervised_run import SupervisedGraph, graph_liveness, run_domain
     from frog_twin.twin import GRAPH_FILE, _restarter
     out.mkdir(parents=True, exist_ok=True)
     earlier = recordings(out / "recording")
     graph = real_graph(args, name, out, path_settings, settings)
     path = path_settings.build()
-    domain = _real_domain(args.domain)
+    domain = run_domain(args.domain)
     watch = RealWatch(domain)
     liveness = graph_liveness(getattr(args, "graph_file", None) or GRAPH_FILE, "real", graph.names(),
                               getattr(args, "budgets", None))
@@ -358,16 +358,6 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
         domain.release()
     summary = dict(run.supervisor.summary(), liveness_verdicts=run.verdicts)
     return real_report(args, name, out, settings, path_settings, reason, t_stop - t_start, checks, summary, earlier)
-
-
-def _real_domain(domain_id):
-    """The run's ROS domain: the caller's id, or one no other run on this machine holds."""
-    from soft_robot_common.processes import RosDomain, acquire_domain
-    if domain_id is None:
-        return acquire_domain()
-    base = acquire_domain()     # the environment; the caller's domain id replaces the held one
-    base.release()
-    return RosDomain(domain_id, dict(base.env, ROS_DOMAIN_ID=str(domain_id)))
 
 
 def real_report(args, name, out, settings, path_settings, reason, wall, checks, supervision=None,

@@ -36,6 +36,17 @@ def parse_budgets(items) -> dict:
     return out
 
 
+def run_domain(domain_id: int | None):
+    """The run's ROS domain: ``domain_id`` (a user's choice, so ``ros2 topic echo`` can join the run),
+    or one no other run on this machine holds."""
+    from soft_robot_common.processes import RosDomain, acquire_domain
+    if domain_id is None:
+        return acquire_domain()
+    base = acquire_domain()     # the environment; the caller's domain id replaces the held one
+    base.release()
+    return RosDomain(domain_id, dict(base.env, ROS_DOMAIN_ID=str(domain_id)))
+
+
 class SupervisedGraph:
     """The processes of ``graph`` on ``env``, supervised per ``liveness`` (see the module docstring).
 

@@ -63,7 +63,7 @@ from frog_planner.core.settings import PathSettings, PlannerSettings, add_argume
 from frog_common.state_age import MAX_STATE_AGE_S
 from soft_robot_common.graph import GraphError, load_graph
 from soft_robot_common.graph_watch import GraphWatch
-from soft_robot_common.processes import NodeProcess, acquire_domain
+from soft_robot_common.processes import NodeProcess
 from soft_robot_common.tool_signals import stop_on_signals
 
 from frog_twin.core import twin_report
@@ -75,7 +75,7 @@ from frog_twin.core.realism import (HARDWARE_PERIOD_S, KICK_STRENGTH_SD, LIMB_ST
 from frog_twin.core.twin_recording import (read_pulse_ages, read_twin_recording, readable_files, recorded_stamps,
                                             recordings, run_files)
 from frog_twin.fault_injection import CHECKED_TOPICS, FaultInjector, RunObserver
-from frog_twin.supervised_run import SupervisedGraph, graph_liveness, parse_budgets
+from frog_twin.supervised_run import SupervisedGraph, graph_liveness, parse_budgets, run_domain
 
 def repo_root() -> Path:
     """The repository (for runs/); the current folder when installed elsewhere."""
@@ -307,7 +307,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
         if any(f.kind == "unplug" for f in faults):     # the injector plugs back in (~/replug)
             graph["robot_emulator"].parameters["unplug_duration_s"] = 0.0
     liveness = graph_liveness(GRAPH_FILE, "sim", graph.names(), getattr(args, "budgets", None))
-    domain = acquire_domain()
+    domain = run_domain(getattr(args, "domain", None))
     watch = PlannerWatch(domain)
     run = SupervisedGraph(graph, liveness, domain.env, out, lambda node: _restarter(node, domain, out, watch),
                           lambda: observer.sim_now, essential=ESSENTIAL_NODES,
@@ -640,8 +640,6 @@ def _main(argv=None) -> int:
                     help="run sim_node beside the robot as a reference prediction (from the tracked start pose, "
                          "executing the planner's primitives; never in the loop)")
     rr.add_argument("--preflight-timeout", type=float, default=20.0, help="longest wait of each pre-flight check [s]")
-    rr.add_argument("--domain", type=int, default=None,
-                    help="ROS domain id of the real run (default: one no other run on this machine holds)")
     rr.add_argument("--tag-lost-timeout", type=float, default=None,
                     help="stop when the tag is not seen for this long [s] (the budget tag_lost_after_s, default 3)")
     gg = ap.add_argument_group("the graph (frog_twin/config/frog_graph.yaml)")
@@ -675,6 +673,9 @@ def _main(argv=None) -> int:
     ap.add_argument("--node-param", action="append", default=[], metavar="NODE:NAME=VALUE",
                     help="set a node's parameter for this run (YAML value; repeatable), e.g. "
                          "--node-param tracker_node:frozen_frames=5 --node-param planner_node:max_state_age_s=0.4")
+    ap.add_argument("--domain", type=int, default=None, choices=range(0, 233), metavar="ID",
+                    help="ROS domain id of the run, to watch it with ros2 topic echo (default: one no other run on "
+                         "this machine holds)")
     ap.add_argument("--budget", action="append", default=[], metavar="NAME=SECONDS",
                     help="replace a liveness budget of the graph file for this run (repeatable; their order is "
                          "checked), e.g. --budget deaf_after_s=6 --budget stuck_after_s=30: restart_backoff_s, "

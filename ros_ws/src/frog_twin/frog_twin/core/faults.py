@@ -38,8 +38,9 @@ KINDS = {
     "clock_stall": (True, None, {}),
     "sigstop": (True, None, {}),
 }
-#: nodes ``kill`` and ``sigstop`` may target (the world, sim_node, and the robot are not faults of the stack)
-TARGETS = ("tracker_node", "planner_node", "bridge_node", "recorder", "camera_sim", "image_preview")
+#: nodes ``kill`` and ``sigstop`` may target (the robot is not a fault of the stack; the world, sim_node, is
+#: not restarted: killed, the run stops)
+TARGETS = ("tracker_node", "planner_node", "bridge_node", "recorder", "camera_sim", "image_preview", "sim_node")
 WALL_DURATION = ("clock_stall", "sigstop")
 
 
