@@ -23,7 +23,7 @@ from soft_robot_common.liveness import Budgets
 
 RESTART_GRACE_S = Budgets().restart_grace_s
 
-pytestmark = pytest.mark.system
+pytestmark = [pytest.mark.system, pytest.mark.usefixtures("one_twin")]
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -137,11 +137,10 @@ def test_the_audit_catches_pulses_on_a_frozen_camera_when_both_hops_are_switched
                         "--node-param", "bridge_node:max_state_age_s=60.0")
     rep = m["faults"]
     assert rep["outcome"] == "failed", rep["outcome"]
-    stale = rep["stale_pulses"]
-    assert len(stale) >= 2, stale
-    assert all(s["published"] > MAX_STATE_AGE_S for s in stale)
+    frozen = [s for s in rep["stale_pulses"] if s["published"] > 2.0]     # kicks well into the 8 s freeze
+    assert len(frozen) >= 2, rep["stale_pulses"]
+    assert all(s["claimed"] > 2.0 for s in frozen)             # the bridge's own record agrees
     assert rep["state_bound_s"] == MAX_STATE_AGE_S           # the design's bound, not the sabotaged run's
-    assert max(s["claimed"] for s in stale) > 2.0            # the bridge's own record agrees
     assert "pulses on a state older than 0.5 s: 0 of" not in stdout
 
 

@@ -46,8 +46,6 @@ def parse_plan(spec: str) -> list:
         if f.kind not in ("kill", "sigstop"):
             raise FaultSpecError(f"{f.label()}: only kill and sigstop are signals (the injector has the rest: "
                                  f"frog-twin --faults)")
-        if f.kind == "kill" and f.target == "sim_node":
-            raise FaultSpecError(f"{f.label()}: the world is not restarted; stop it instead (sigstop:sim_node)")
     return plan
 
 

@@ -329,6 +329,7 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
                         "the recorder subscribed to the loop's topics", run.supervisor.processes())
         watch.base.start_planner()
         t_start = time.monotonic()
+        run.monitor.restart(t_start, t_start)                  # the pre-flight does not count as silence
         print(f"  {name}: following on the real robot (at most {args.duration:.0f} s; Ctrl-C or "
               f"/frog/stop stops)", flush=True)
         while reason is None:

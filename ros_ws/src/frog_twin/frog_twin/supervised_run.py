@@ -85,9 +85,10 @@ class SupervisedGraph:
             self._on_restart(name)
 
     def down(self) -> set:
-        """Nodes not running, waiting for their restart, or restarted and not ready yet."""
+        """Nodes not running, waiting for their restart, or restarted and not ready yet (a node whose
+        exit was meant is not coming back: the run goes on without it, and is not waiting for it)."""
         s = self.supervisor
-        return {n for n in s.names() if s.down(n)} | set(s.recovering())
+        return {n for n in s.names() if s.down(n) and not s.released(n)} | set(s.recovering())
 
     def poll(self, held=(), on_verdict=None) -> str | None:
         """Restarts due, then every contract; the reason to stop the run, or None. ``held``: nodes
@@ -95,7 +96,8 @@ class SupervisedGraph:
         reason = self.supervisor.poll()
         if reason:
             return reason
-        for v in self.monitor.evaluate(time.monotonic(), self.sim_now(), self.down(), held):
+        gone = {n for n in self.supervisor.names() if self.supervisor.released(n)}    # silent for good, on purpose
+        for v in self.monitor.evaluate(time.monotonic(), self.sim_now(), self.down(), set(held) | gone):
             self.verdicts.append({"action": v.action, "node": v.node, "reason": v.reason, "rule": v.rule,
                                   "sim_time": self.sim_now()})
             if on_verdict is not None:

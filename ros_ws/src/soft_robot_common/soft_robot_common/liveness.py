@@ -253,6 +253,12 @@ class LivenessMonitor:
             if node in e.producers or node == e.consumer:
                 self._edges[e.name].restart(self._now(e.clock, now, sim))
 
+    def restart(self, now: float, sim: float | None = None) -> None:
+        """Every edge's wait starts again now (the run starts: what came before it does not count)."""
+        for e in self.liveness.edges:
+            self._edges[e.name].restart(self._now(e.clock, now, sim))
+        self._states.clear()
+
     def message(self, topic: str, now: float, sim: float | None = None) -> None:
         """An arrival on ``topic`` (root-relative names match an edge's relative topic)."""
         for e in self.liveness.edges:
@@ -309,6 +315,8 @@ class LivenessMonitor:
             if (set(e.producers) | {e.consumer}) & (down | held) or w.produced_at is None:
                 w.restart(t)
                 continue
+            if e.consumer_count and (e.consumer, e.consumer_count) not in self._values:
+                w.heard_at, w.published = t, 0      # the consumer has not subscribed to it yet
             producer = "/".join(e.producers)
             silent = t - w.produced_at
             if silent >= bound and e.then != "wait":

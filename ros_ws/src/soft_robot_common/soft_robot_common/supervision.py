@@ -144,6 +144,10 @@ class Supervisor:
         """Whether node ``name`` is not running now (crashed, waiting for its restart)."""
         return not self._slots[name].process.running()
 
+    def released(self, name: str) -> bool:
+        """Whether node ``name``'s exit was meant (:meth:`release`): it is not coming back."""
+        return self._slots[name].released
+
     def _event(self, node: str, what: str, code=None, detail: str = "") -> None:
         ev = SupervisionEvent(time.monotonic(), node, what, code, detail)
         self.events.append(ev)

@@ -152,3 +152,19 @@ def test_a_deaf_recorder_is_restarted_from_the_arrivals_the_monitor_saw():
             break
     (v,) = verdicts
     assert v.node == "recorder" and k == 10 and v.since_sim == pytest.approx(2.0)
+
+
+def test_a_consumer_not_yet_subscribed_is_not_deaf_and_the_start_up_does_not_count():
+    m = LivenessMonitor(frog())
+    m.started("recorder", pid=5, now=0.0, sim=0.0)
+    for k in range(20):                  # the recorder has not subscribed to frog/primitive: no key for it
+        m.message("/clock", float(k), float(k))
+        m.message("/frog/primitive", float(k), float(k))
+        m.diagnostics("recorder", {"messages /frog/planner/status": str(k), "pid": "5"}, float(k), float(k))
+        assert [v for v in m.evaluate(float(k), float(k)) if v.rule == "record_primitive"] == []
+    m2 = LivenessMonitor(frog())        # silence before the run's start is forgiven by restart()
+    m2.message("/clock", 0.0, 0.0)
+    m2.evaluate(0.0, 0.0)
+    m2.restart(9.5, 9.5)
+    m2.message("/clock", 9.6, 9.6)
+    assert m2.evaluate(19.0, 9.6) == [] and m2.evaluate(19.7, 9.6)[0].rule == "clock"

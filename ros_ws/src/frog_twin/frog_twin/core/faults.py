@@ -38,9 +38,9 @@ KINDS = {
     "clock_stall": (True, None, {}),
     "sigstop": (True, None, {}),
 }
-#: nodes ``kill`` and ``sigstop`` may target (the robot is not a fault of the stack; the world, sim_node, is
-#: not restarted: killed, the run stops)
-TARGETS = ("tracker_node", "planner_node", "bridge_node", "recorder", "camera_sim", "image_preview", "sim_node")
+#: nodes ``kill`` and ``sigstop`` may target (the world, sim_node, and the robot are not faults of the stack;
+#: the world may be stopped for a while: ``sigstop:sim_node``, a starved simulator)
+TARGETS = ("tracker_node", "planner_node", "bridge_node", "recorder", "camera_sim", "image_preview")
 WALL_DURATION = ("clock_stall", "sigstop")
 
 
@@ -106,7 +106,7 @@ def _parse_one(item: str) -> Fault:
     if not needs_duration and plus:
         raise FaultSpecError(f"fault {item!r}: {kind} takes no duration")
     if kind in ("kill", "sigstop"):
-        if target not in TARGETS:
+        if target not in TARGETS + (("sim_node",) if kind == "sigstop" else ()):
             raise FaultSpecError(f"fault {item!r}: {kind} needs a node, one of {', '.join(TARGETS)} "
                                  f"(e.g. {kind}:tracker_node@{at_text})")
     elif target:
@@ -320,6 +320,8 @@ def fault_report(faults, observer, sim_start: float, injector, recorded: dict, p
     behind every pulse, by publish times and by the bridge's own record)."""
     obs = observer.obs
     shifted = [replace(f, at=f.at + sim_start) for f in faults]
+    # the recorded poses judge a pulse only while the recorder was up (1 s margins: its subscriptions)
+    pulse_ages.complete = [(a + 1.0, b) for a, b in observer.recorder_up if b > a + 1.0]
     stale = pulse_ages.stale()
     gaps = observer.discovery_gaps()
     losses = recorder_losses(observer.seen, recorded, observer.recorder_up, excluded=gaps)

@@ -5,9 +5,11 @@ publishes on ``frog/odom``, and for each frame ``frog/tracker/state`` says wheth
 measured or predicted. The audit takes, for each pulse, the newest *measured* pose published
 before it (by the middleware's publish times, which no node computes; the recorder's receive
 times as a second reading) and its age when the pulse was written. It also reads the age the
-bridge itself recorded (``LimbActivation.state_age``) and reports both: a pulse is on a stale
-state if either exceeds the bound. Without tracker states in the recording (odometry from the
-simulator), every odometry message is a measurement.
+bridge itself recorded (``LimbActivation.state_age``): that needs no trust in the planner. A
+pulse is on a stale state if the bridge's record exceeds the bound, or, where the recording is
+known to be complete (the recorder up; a whole run when nothing stopped it), if the recorded
+poses say so. Without tracker states in the recording (odometry from the simulator), every
+odometry message is a measurement.
 
 Times are seconds on the recording machine's wall clock; with the twin faster than real time,
 ``real_time_factor`` turns the wall ages into simulated ones (the bound is on the node clock).
@@ -29,15 +31,25 @@ class PulseAges:
     received: np.ndarray = field(default_factory=lambda: np.zeros(0))    # from the recorder's receive times
     claimed: np.ndarray = field(default_factory=lambda: np.zeros(0))     # the bridge's own state_age
     times: np.ndarray = field(default_factory=lambda: np.zeros(0))       # each pulse's publish time
+    stamps: np.ndarray = field(default_factory=lambda: np.zeros(0))      # each pulse's header stamp (node clock)
+    complete: list | None = None       # [(t0, t1)] of stamps where the recording is complete (None: all of it)
 
     @property
     def n(self) -> int:
         return len(self.times)
 
+    def judged(self) -> np.ndarray:
+        """Which pulses the recorded poses can judge: those inside an interval of a complete recording."""
+        if self.complete is None:
+            return np.ones(self.n, dtype=bool)
+        return np.array([any(a <= t <= b for a, b in self.complete) for t in self.stamps], dtype=bool)
+
     def stale(self) -> list[dict]:
-        """Pulses on a state older than the bound by any reading: {t, published, received, claimed}."""
-        bad = (self.published > self.bound_s) | (self.claimed > self.bound_s)
-        return [{"t": float(self.times[i]), "published": float(self.published[i]),
+        """Pulses on a state older than the bound: by the bridge's record, or by the recorded poses where
+        the recording is complete: {t, stamp, published, received, claimed}."""
+        recorded = self.judged() & ((self.published > self.bound_s) | (self.received > self.bound_s))
+        bad = recorded | (self.claimed > self.bound_s)
+        return [{"t": float(self.times[i]), "stamp": float(self.stamps[i]), "published": float(self.published[i]),
                  "received": float(self.received[i]), "claimed": float(self.claimed[i])} for i in np.flatnonzero(bad)]
 
     def summary(self) -> dict:
@@ -45,8 +57,10 @@ class PulseAges:
             a = a[np.isfinite(a)]
             return {"median": float(np.median(a)), "p99": float(np.quantile(a, 0.99)), "max": float(a.max())} \
                 if len(a) else None
-        return {"pulses": self.n, "bound_s": self.bound_s, "stale": len(self.stale()),
-                "published": stat(self.published), "received": stat(self.received), "claimed": stat(self.claimed)}
+        judged = self.judged()
+        return {"pulses": self.n, "bound_s": self.bound_s, "stale": len(self.stale()), "judged": int(judged.sum()),
+                "published": stat(self.published[judged]), "received": stat(self.received[judged]),
+                "claimed": stat(self.claimed)}
 
 
 def measured_poses(odom, states=None):
@@ -65,7 +79,7 @@ def measured_poses(odom, states=None):
 def pulse_ages(pulses, measured, bound_s: float, real_time_factor: float = 1.0) -> PulseAges:
     """Ages of the state behind each pulse.
 
-    ``pulses``: (publish time, receive time, claimed state age) per frog/bridge/sent message;
+    ``pulses``: (publish time, receive time, claimed state age, header stamp) per frog/bridge/sent message;
     ``measured``: from :func:`measured_poses`. A pulse with no measured pose before it gets an
     infinite age (it rests on nothing the audit can see).
     """
@@ -75,14 +89,15 @@ def pulse_ages(pulses, measured, bound_s: float, real_time_factor: float = 1.0) 
     rows = sorted(pulses)
     if not rows:
         return out
-    times, published, received, claimed = [], [], [], []
-    for p, r, claim in rows:
+    times, published, received, claimed, stamps = [], [], [], [], []
+    for p, r, claim, stamp in rows:
         i = bisect.bisect_right(pub, p) - 1
         j = bisect.bisect_right(rec, r) - 1
         times.append(p)
         published.append((p - pub[i]) * real_time_factor if i >= 0 else np.inf)
         received.append((r - rec[j]) * real_time_factor if j >= 0 else np.inf)
         claimed.append(claim)
-    out.times, out.published, out.received, out.claimed = (np.array(v, dtype=float) for v in
-                                                          (times, published, received, claimed))
+        stamps.append(stamp)
+    out.times, out.published, out.received, out.claimed, out.stamps = (
+        np.array(v, dtype=float) for v in (times, published, received, claimed, stamps))
     return out

@@ -142,5 +142,5 @@ def read_pulse_ages(mcap_files, bound_s: float, real_time_factor: float = 1.0):
                 seen_states = True
                 states[round(_t(m.header.stamp), 6)] = _t(m.state_stamp)
             elif len(m.limbs):
-                pulses.append((pub_ns * 1e-9, log_ns * 1e-9, float(m.state_age)))
+                pulses.append((pub_ns * 1e-9, log_ns * 1e-9, float(m.state_age), _t(m.header.stamp)))
     return pulse_ages(pulses, measured_poses(odom, states if seen_states else None), bound_s, real_time_factor)

@@ -75,12 +75,14 @@ class TrackerNode(Node):
         self.last_kick: float | None = None       # stamp of the last limb firing [s]
         if self.fixed_camera is not None:
             self._make_tracker(self.fixed_camera)
-        # keep the last 2 only: a busy tracker skips frames instead of working through a growing
-        # backlog of old ones. Reliable: best-effort loses most 0.9 MB frames on the way (a
-        # lost UDP fragment drops the whole sample), and a keep-last writer never blocks on it.
-        sensor = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE)
+        # keep the newest frame only: a busy tracker skips frames instead of working through old ones
+        # (each one queued adds a frame interval to the age of every decision). Reliable: best-effort
+        # loses most 0.9 MB frames on the way (a lost UDP fragment drops the whole sample), and a
+        # keep-last writer never blocks on it.
+        sensor = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(Image, "camera/image_raw", self.on_image, sensor)
-        self.create_subscription(CameraInfo, "camera/camera_info", self.on_info, sensor)
+        self.create_subscription(CameraInfo, "camera/camera_info", self.on_info, QoSProfile(
+            depth=2, reliability=ReliabilityPolicy.RELIABLE))
         if p["kick_topic"]:
             self.create_subscription(LimbActivation, p["kick_topic"], self.on_kick,
                                      QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
