@@ -97,15 +97,19 @@ class SupervisedGraph:
         if reason:
             return reason
         gone = {n for n in self.supervisor.names() if self.supervisor.released(n)}    # silent for good, on purpose
+        restarted = set()
         for v in self.monitor.evaluate(time.monotonic(), self.sim_now(), self.down(), set(held) | gone):
+            if v.action == "restart" and (v.node in restarted or v.node not in self.supervisor.names()
+                                          or self.supervisor.down(v.node)):
+                continue                    # one restart per node (several of its edges can say so at once)
             self.verdicts.append({"action": v.action, "node": v.node, "reason": v.reason, "rule": v.rule,
                                   "sim_time": self.sim_now()})
             if on_verdict is not None:
                 on_verdict(v)
             if v.action == "stop":
                 return v.reason
-            if v.node in self.supervisor.names() and not self.supervisor.down(v.node):
-                self.supervisor.kill_hung(v.node, v.reason)
+            restarted.add(v.node)
+            self.supervisor.kill_hung(v.node, v.reason)
         return None
 
     def edge_topic(self, rule: str) -> str | None:

@@ -346,7 +346,7 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
                    supervision=run.supervisor.summary(), liveness_verdicts=run.verdicts,
                    unclean_stops=run.supervisor.unclean_stops())
     # the design's bound, not the run's: a run that raises its nodes' bound is audited against it too
-    ages = read_pulse_ages(files, MAX_STATE_AGE_S, args.real_time_factor)
+    ages = read_pulse_ages(files, MAX_STATE_AGE_S)
     metrics["pulse_ages"] = ages.summary()
     if faults:
         metrics["faults"] = fault_report(faults, observer, sim_start, injector,

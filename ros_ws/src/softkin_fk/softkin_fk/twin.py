@@ -338,15 +338,15 @@ def main(argv=None) -> int:
     from soft_robot_common.graph_watch import GraphWatch
     watch = GraphWatch(int(env["ROS_DOMAIN_ID"]), "softkin_twin_start")
 
-    def start(name, timeout):
+    def start(name, timeout, keys=("ready",)):
         """Start a node and wait until its diagnostics say it is ready (never its log)."""
         pr = graph[name].start(env, out)
         procs.append(pr)
-        watch.wait_ready(name, pr.pid, timeout=timeout, procs=procs)
+        watch.wait_ready(name, pr.pid, keys=keys, timeout=timeout, procs=procs)
 
     t_start = time.monotonic()
     try:
-        start("recorder", 60)
+        start("recorder", 60, keys=())      # up: it subscribes to the topics once their publishers start
         if not args.port:
             start("marlin_emulator", 60)
         start("stepper_driver", 60)

@@ -199,14 +199,14 @@ class PlannerNode(Node):
             self._deadline_timer = None
         planner = self.loop.planner
         expander, reason = self.rollouts.result(self._future, self._reason, planner.model.primitive_names,
-                                                planner.depth, self.cfg["reanchor"], self.cfg["decision_deadline"])
+                                                planner.depth, self.cfg["reanchor"], self.cfg["decision_deadline"],
+                                                self.settings.period)
         out = self.loop.finish(expander, reason)
         if out is not None:
             self.publish(out)
 
     def replan(self) -> None:
-        problem = self.loop.replan()
-        if problem:
+        if problem := self.loop.replan():
             self.get_logger().error(problem, throttle_duration_sec=2.0)
 
     def publish(self, out: dl.Outcome) -> None:
@@ -217,10 +217,9 @@ class PlannerNode(Node):
                 self.get_logger().warning(text)
             else:
                 self.get_logger().info(text)
-        now = self.get_clock().now()
         pid, name = out.primitive
         msg = self._Primitive(id=pid, name=name)
-        msg.header.stamp, msg.header.frame_id = now.to_msg(), self.cfg["world_frame"]
+        msg.header.stamp, msg.header.frame_id = self.get_clock().now().to_msg(), self.cfg["world_frame"]
         if out.state_stamp is not None and pid != self._Primitive.ID_I:
             msg.state_stamp = to_time(out.state_stamp, self.get_clock()).to_msg()
         self.primitive_pub.publish(msg)
@@ -231,7 +230,8 @@ class PlannerNode(Node):
 
     def _diagnostics(self):
         level, message, values = loop_report(self.loop, self.path.name)
-        return level, message, {"library_file": self.cfg["library_file"], **values}
+        return level, message, {"library_file": self.cfg["library_file"], **values,
+                                "last_rollout_s": self.rollouts.last_compute_s}
 
     def destroy_node(self):
         if self.loop.simulator_decisions or self.loop.fallback_decisions:     # the run's count, for reports

@@ -28,6 +28,7 @@ class RolloutClient:
         self.client = node.create_client(Rollouts, service)
         self.limb_names = limb_names       # LimbActivation id -> name ("FL", ...)
         self.fired = {}                    # limb name -> node-clock Time of its last pulse start
+        self.last_compute_s = float("nan")  # the server's compute time of the last response
 
     def on_sent(self, msg) -> None:
         """Record the limbs the bridge fired (``frog/bridge/sent``)."""
@@ -60,16 +61,20 @@ class RolloutClient:
         if future is not None and not future.done():
             self.client.remove_pending_request(future)
 
-    def result(self, future, reason, names, depth: int, reanchor: bool, deadline_periods: float):
+    def result(self, future, reason, names, depth: int, reanchor: bool, deadline_periods: float, period: float):
         """At the deadline: ``(expander, None)`` from a response that came in time, else ``(None, why not)``
-        (``reason``: why no request was sent). A request still pending is cancelled."""
+        (``reason``: why no request was sent). A request still pending is cancelled; the server's compute
+        time of the last response is kept (``last_compute_s``)."""
         if future is None:
             return None, reason
         if not future.done():
             self.cancel(future)
-            return None, f"rollouts missed the deadline ({deadline_periods:.2f} periods)"
+            return None, (f"rollouts missed the deadline ({deadline_periods:.2f} periods = "
+                          f"{deadline_periods * period:.2f} s)")
         try:
-            return self.expander(future.result(), names, depth, reanchor)
+            response = future.result()
+            self.last_compute_s = float(response.compute_time)
+            return self.expander(response, names, depth, reanchor)
         except Exception as exc:           # noqa: BLE001 - a failed call is a fallback, not a crash
             return None, f"rollout call failed: {exc}"
 

@@ -2,17 +2,16 @@
 
 Every pulse the bridge writes is recorded on ``frog/bridge/sent``; every pose the tracker
 publishes on ``frog/odom``, and for each frame ``frog/tracker/state`` says whether that pose was
-measured or predicted. The audit takes, for each pulse, the newest *measured* pose published
+measured or predicted. The audit takes, for each pulse, the newest *measured* pose that existed
 before it (by the middleware's publish times, which no node computes; the recorder's receive
-times as a second reading) and its age when the pulse was written. It also reads the age the
+times as a second reading) and its age when the pulse was written: the pulse's stamp minus the
+pose's capture stamp, both on the node clock the bound is defined on (simulated time in the twin,
+so a paused or slowed world does not count as age). It also reads the age the
 bridge itself recorded (``LimbActivation.state_age``): that needs no trust in the planner. A
 pulse is on a stale state if the bridge's record exceeds the bound, or, where the recording is
 known to be complete (the recorder up; a whole run when nothing stopped it), if the recorded
 poses say so. Without tracker states in the recording (odometry from the simulator), every
 odometry message is a measurement.
-
-Times are seconds on the recording machine's wall clock; with the twin faster than real time,
-``real_time_factor`` turns the wall ages into simulated ones (the bound is on the node clock).
 """
 from __future__ import annotations
 
@@ -30,7 +29,7 @@ class PulseAges:
     published: np.ndarray = field(default_factory=lambda: np.zeros(0))   # from publish times
     received: np.ndarray = field(default_factory=lambda: np.zeros(0))    # from the recorder's receive times
     claimed: np.ndarray = field(default_factory=lambda: np.zeros(0))     # the bridge's own state_age
-    times: np.ndarray = field(default_factory=lambda: np.zeros(0))       # each pulse's publish time
+    times: np.ndarray = field(default_factory=lambda: np.zeros(0))       # each pulse's publish time (wall)
     stamps: np.ndarray = field(default_factory=lambda: np.zeros(0))      # each pulse's header stamp (node clock)
     complete: list | None = None       # [(t0, t1)] of stamps where the recording is complete (None: all of it)
 
@@ -64,27 +63,32 @@ class PulseAges:
 
 
 def measured_poses(odom, states=None):
-    """The (publish time, receive time) of the odometry that was measured, in time order.
+    """The (publish time, receive time, stamp) of the odometry that was measured, by publish time.
 
     ``odom``: (header stamp, publish time, receive time) per frog/odom message; ``states``:
     {header stamp: state stamp} of frog/tracker/state (None: every pose is measured). A pose
     is measured when the tracker's state for its frame has the frame's own stamp; a pose
     without a recorded state counts as predicted (not trusted as fresh).
     """
-    rows = [(p, r) for stamp, p, r in odom
+    rows = [(p, r, stamp) for stamp, p, r in odom
             if states is None or abs(states.get(round(stamp, 6), -1.0) - stamp) < 1e-6]
     return sorted(rows)
 
 
-def pulse_ages(pulses, measured, bound_s: float, real_time_factor: float = 1.0) -> PulseAges:
+def pulse_ages(pulses, measured, bound_s: float) -> PulseAges:
     """Ages of the state behind each pulse.
 
     ``pulses``: (publish time, receive time, claimed state age, header stamp) per frog/bridge/sent message;
     ``measured``: from :func:`measured_poses`. A pulse with no measured pose before it gets an
     infinite age (it rests on nothing the audit can see).
     """
-    pub = [p for p, _ in measured]
-    rec = sorted(r for _, r in measured)
+    pub = [p for p, _, _ in measured]
+    by_receipt = sorted((r, st) for _, r, st in measured)
+    rec = [r for r, _ in by_receipt]
+    # the newest capture among the measurements that existed by each one (a later frame captured
+    # earlier cannot make the state younger)
+    newest_pub = np.maximum.accumulate([st for _, _, st in measured]) if measured else np.zeros(0)
+    newest_rec = np.maximum.accumulate([st for _, st in by_receipt]) if measured else np.zeros(0)
     out = PulseAges(bound_s)
     rows = sorted(pulses)
     if not rows:
@@ -94,8 +98,9 @@ def pulse_ages(pulses, measured, bound_s: float, real_time_factor: float = 1.0) 
         i = bisect.bisect_right(pub, p) - 1
         j = bisect.bisect_right(rec, r) - 1
         times.append(p)
-        published.append((p - pub[i]) * real_time_factor if i >= 0 else np.inf)
-        received.append((r - rec[j]) * real_time_factor if j >= 0 else np.inf)
+        # the newest measurement that existed before the pulse (by its time), aged on the node clock
+        published.append(stamp - newest_pub[i] if i >= 0 else np.inf)
+        received.append(stamp - newest_rec[j] if j >= 0 else np.inf)
         claimed.append(claim)
         stamps.append(stamp)
     out.times, out.published, out.received, out.claimed, out.stamps = (

@@ -127,7 +127,7 @@ def recorded_stamps(mcap_files, topics) -> dict:
     return out
 
 
-def read_pulse_ages(mcap_files, bound_s: float, real_time_factor: float = 1.0):
+def read_pulse_ages(mcap_files, bound_s: float):
     """The :class:`~frog_twin.core.state_audit.PulseAges` of a recording: the state behind every pulse
     on frog/bridge/sent, from the recorded odometry and tracker states (see that module)."""
     from frog_twin.core.state_audit import measured_poses, pulse_ages
@@ -143,4 +143,4 @@ def read_pulse_ages(mcap_files, bound_s: float, real_time_factor: float = 1.0):
                 states[round(_t(m.header.stamp), 6)] = _t(m.state_stamp)
             elif len(m.limbs):
                 pulses.append((pub_ns * 1e-9, log_ns * 1e-9, float(m.state_age), _t(m.header.stamp)))
-    return pulse_ages(pulses, measured_poses(odom, states if seen_states else None), bound_s, real_time_factor)
+    return pulse_ages(pulses, measured_poses(odom, states if seen_states else None), bound_s)

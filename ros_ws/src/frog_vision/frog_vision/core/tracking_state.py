@@ -27,11 +27,13 @@ OK, WARN, ERROR = 0, 1, 2
 
 @dataclass(frozen=True)
 class Change:
-    """A change of state worth a log line: ``warn`` for trouble, else info."""
+    """Something worth a log line: a change of state (``warn`` for trouble, else info), or a refused
+    frame (``error``)."""
 
     state: int | None
     text: str
     warn: bool = False
+    error: bool = False
 
 
 class TrackingStates:
@@ -85,8 +87,8 @@ class TrackingStates:
         if self.last_stamp is not None:
             gap = stamp - self.last_stamp
             if not gap > 0:
-                self.error(f"frame stamped {stamp:.3f} s is not newer than the last ({self.last_stamp:.3f} s)")
-                return "skip", None
+                text = f"frame stamped {stamp:.3f} s is not newer than the last ({self.last_stamp:.3f} s)"
+                return "skip", Change(self.state, text, error=True) if self.error(text) else None
             if self.period is not None and gap > 1.5 * self.period:     # against the interval before it
                 self.dropped += int(round(gap / self.period)) - 1
             self.period = gap if self.period is None else min(0.95 * self.period + 0.05 * gap, gap * 1.5)

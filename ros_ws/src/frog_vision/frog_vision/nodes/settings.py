@@ -38,3 +38,18 @@ TRACKER_PARAMS = TAG_PARAMS + CAMERA_PARAMS + [
     Param("frozen_frames", 3, "this many byte-identical frames in a row (the first included) mean a frozen camera: "
           "nothing is published from them until the frames change", min=2, max=1000, live=True),
 ]
+
+
+def filter_settings(values: dict) -> FilterSettings:
+    """The tracker's filter settings from its parameters (ValueError naming a bad one)."""
+    from frog_common.settings import from_params
+    return from_params(FilterSettings, {k: values[k] for k in FILTER_PARAMS})
+
+
+def filter_problem(values: dict) -> str | None:
+    """Why a candidate parameter set gives no usable filter settings, or None."""
+    try:
+        filter_settings(values)
+    except ValueError as exc:
+        return str(exc)
+    return None

@@ -43,13 +43,13 @@ from frog_common.se2 import set_yaw
 from frog_common.settings import from_params
 from frog_vision.core.detection import DetectorSettings
 from frog_vision.core.pose import PoseSettings
-from frog_vision.core.state_filter import FilterSettings
 from frog_vision.core.tracker import Tracker, annotate
 from frog_vision.core.tracking_state import TrackingStates
 from frog_vision.nodes.common import load_camera, load_camera_pose
 from frog_vision.nodes.messages import (array_to_image, image_to_array, model_from_camera_info, planar_covariance,
                                         s_to_stamp, stamp_to_s)
-from frog_vision.nodes.settings import FILTER_PARAMS, TRACKER_PARAMS as PARAMS
+from frog_vision.nodes.settings import TRACKER_PARAMS as PARAMS
+from frog_vision.nodes.settings import filter_problem, filter_settings
 
 
 class TrackerNode(Node):
@@ -57,7 +57,7 @@ class TrackerNode(Node):
 
     def __init__(self):
         super().__init__("tracker_node")
-        p = declare_parameters(self, PARAMS, validate=self._validate, on_change=self._apply)
+        p = declare_parameters(self, PARAMS, validate=filter_problem, on_change=self._apply)
         self.cfg = dict(p)
         self.fixed_camera = load_camera(p["camera_info_file"])
         self.camera_pose = load_camera_pose(p["tank_calibration_file"])
@@ -66,7 +66,7 @@ class TrackerNode(Node):
         try:
             self.detector = from_params(DetectorSettings, p, family=p["tag_family"], tag_ids=(p["tag_id"],))
             self.pose_settings = from_params(PoseSettings, p)
-            self.filter_settings = self._filter_settings(p)
+            self.filter_settings = filter_settings(p)
         except ValueError as exc:
             raise ConfigurationError(str(exc)) from exc
         self.tracker: Tracker | None = None
@@ -102,22 +102,11 @@ class TrackerNode(Node):
         self.diagnostics = NodeDiagnostics(self, "tag tracking", self._diagnostics, hardware_id="camera")
         self.get_logger().info(f"tracking {p['tag_family']} id {p['tag_id']} ({p['tag_size'] * 1e3:g} mm)")
 
-    @staticmethod
-    def _filter_settings(p) -> FilterSettings:
-        return from_params(FilterSettings, {k: p[k] for k in FILTER_PARAMS})
-
-    def _validate(self, values: dict) -> str | None:
-        try:
-            self._filter_settings(values)
-        except ValueError as exc:
-            return str(exc)
-        return None
-
     def _apply(self, changed: dict) -> None:
         self.cfg.update(changed)
         if "frozen_frames" in changed:
             self.states.frozen.frozen_frames = int(changed["frozen_frames"])
-        self.filter_settings = self._filter_settings(self.cfg)
+        self.filter_settings = filter_settings(self.cfg)
         if self.tracker is not None:
             self.tracker.filter.settings = self.filter_settings
 
@@ -133,6 +122,9 @@ class TrackerNode(Node):
 
     def _log(self, change) -> None:
         if change is not None:                    # rclpy wants one severity per call site
+            if change.error:
+                self.get_logger().error(change.text)
+                return
             if change.warn:
                 self.get_logger().warning(change.text)
             else:
