@@ -69,3 +69,11 @@ def test_where_the_recording_is_incomplete_only_the_bridge_s_record_judges():
     ages.complete = [(0.0, 4.0), (8.5, 10.0)]
     assert [b["stamp"] for b in ages.stale()] == [6.0]                # the bridge's own record still judges
     assert ages.summary()["judged"] == 1
+
+
+def test_receive_order_across_topics_is_reported_not_judged():
+    """The recorder took the pulse off its queue before odometry published earlier: the receive
+    reading says 5 s, the publish times say the state was fresh; only the latter judges."""
+    odom = [(s, p, r + (5.0 if s > 3.0 else 0.0)) for s, p, r in _odom(0.0, 6.0)]
+    ages = pulse_ages([_pulse(5.5)], measured_poses(odom), 0.5)
+    assert ages.received[0] > 2.0 and ages.published[0] < 0.1 and ages.stale() == []

@@ -149,13 +149,14 @@ def check_against_graph(faults, nodes) -> None:
 
 
 # -- the campaign's plan -------------------------------------------------------------------------
-#: one representative of each fault the campaign runs; durations longer than the planner's
-#: stale bound (2 periods = 2.9 s) where staleness is what the fault tests
+#: one representative of each fault the campaign runs; durations well beyond the state-age bound
+#: (0.5 s) where staleness is what the fault tests, and the stops of the vision-to-decision chain
+#: (5 s) and of the world (3 s) that signals from outside also send (frog_twin.outside_faults)
 CAMPAIGN_FAULTS = (
     "camera_freeze@0+5", "camera_stop@0+5", "occlude@0+4", "frame_drop@0+8,rate=0.5", "ble_loss@0+5,rate=0.8",
     "unplug@0+2", "emergency@0", "kill:tracker_node@0", "kill:planner_node@0", "kill:bridge_node@0",
     "kill:recorder@0", "kill:camera_sim@0", "kill:tracker_node@0,restart=no", "clock_stall@0+3",
-    "sigstop:planner_node@0+4", "sigstop:tracker_node@0+4",
+    "sigstop:planner_node@0+5", "sigstop:tracker_node@0+5", "sigstop:camera_sim@0+5", "sigstop:sim_node@0+3",
 )
 #: the moments of a path a fault is injected at, as fractions of the path's nominal time
 CAMPAIGN_MOMENTS = (0.2, 0.45, 0.7)

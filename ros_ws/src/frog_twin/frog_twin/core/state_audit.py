@@ -4,7 +4,7 @@ Every pulse the bridge writes is recorded on ``frog/bridge/sent``; every pose th
 publishes on ``frog/odom``, and for each frame ``frog/tracker/state`` says whether that pose was
 measured or predicted. The audit takes, for each pulse, the newest *measured* pose that existed
 before it (by the middleware's publish times, which no node computes; the recorder's receive
-times as a second reading) and its age when the pulse was written: the pulse's stamp minus the
+times are reported beside them) and its age when the pulse was written: the pulse's stamp minus the
 pose's capture stamp, both on the node clock the bound is defined on (simulated time in the twin,
 so a paused or slowed world does not count as age). It also reads the age the
 bridge itself recorded (``LimbActivation.state_age``): that needs no trust in the planner. A
@@ -44,9 +44,13 @@ class PulseAges:
         return np.array([any(a <= t <= b for a, b in self.complete) for t in self.stamps], dtype=bool)
 
     def stale(self) -> list[dict]:
-        """Pulses on a state older than the bound: by the bridge's record, or by the recorded poses where
-        the recording is complete: {t, stamp, published, received, claimed}."""
-        recorded = self.judged() & ((self.published > self.bound_s) | (self.received > self.bound_s))
+        """Pulses on a state older than the bound: by the bridge's record, or by the recorded poses (their
+        publish times) where the recording is complete: {t, stamp, published, received, claimed}.
+
+        The receive times are reported, not judged: the recorder takes each topic's queue in turn, so a
+        pulse can be received before odometry published earlier (seen: 5.3 s apart while the recorder
+        caught up after a restarted camera), which is the recorder's order, not the robot's."""
+        recorded = self.judged() & (self.published > self.bound_s)
         bad = recorded | (self.claimed > self.bound_s)
         return [{"t": float(self.times[i]), "stamp": float(self.stamps[i]), "published": float(self.published[i]),
                  "received": float(self.received[i]), "claimed": float(self.claimed[i])} for i in np.flatnonzero(bad)]
