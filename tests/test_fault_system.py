@@ -416,7 +416,10 @@ def test_signals_from_outside_the_twin_never_fire_a_limb_on_a_stale_state(path, 
     assert rec["exit"] == 0 and rec["outcome"] in ("completed", "stopped"), why
     assert [s["signal"] for s in rec["sent"] if s["pid"]] == [f.label() for f in parse_plan(plan)], why
     ages = rec["pulse_ages"]
-    assert ages["pulses"] >= 5 and rec["stale_pulses"] == [], why
+    # A stop is a legitimate end (a restarted camera that never receives is restarted until its
+    # budget runs out, docs/faults.md); the age checks hold on the pulses before it.
+    assert ages["pulses"] >= (5 if rec["outcome"] == "completed" else 1), why
+    assert rec["stale_pulses"] == [], why
     assert ages["published"]["max"] <= MAX_STATE_AGE_S
     assert ages["claimed"]["max"] <= MAX_STATE_AGE_S, why
     if rec["outcome"] == "stopped":
