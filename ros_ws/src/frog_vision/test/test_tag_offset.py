@@ -26,6 +26,7 @@ def straight_swim(offset, duration=30.0, rate=30.0, seed=0, noise=(0.0003, math.
 
 
 @pytest.mark.parametrize("offset", [(0.0034, 0.0, math.radians(5.6)), (-0.004, 0.003, math.radians(-3.0))])
+@pytest.mark.slow
 def test_known_offset_is_recovered(offset):
     t, tag = straight_swim(offset)
     r = estimate_tag_offset(t, tag)
