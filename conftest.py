@@ -20,11 +20,14 @@ each done in a fraction of a second and starting no node.
 
 from __future__ import annotations
 
+import fcntl
 import multiprocessing.process
 import os
 import subprocess
 import threading
 import time
+import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -234,3 +237,84 @@ def pytest_fixture_setup(fixturedef, request):
 
 _CPU_AT_SETUP = pytest.StashKey[float]()
 
+
+# ---- built once per run, for every worker -------------------------------------------------------
+
+KERNEL_PACKAGES = ("frog_sim", "frog_twin", "softkin_fk")   # their tests run numba kernels
+
+
+@contextmanager
+def _run_lock(path: Path):
+    """An exclusive lock on ``path`` across processes (the pytest-xdist workers)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _run_folder(tmp_path_factory) -> Path:
+    """A folder all workers of this run share (pytest's base folder of the run)."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
+def _needs_kernels(item) -> bool:
+    parts = Path(os.path.relpath(item.path, item.config.rootpath)).parts
+    return is_system(item) or (parts[:2] == ("ros_ws", "src") and parts[2] in KERNEL_PACKAGES)
+
+
+def _compile_kernels():
+    """Run the simulator (with the twin's realism), a rollout and the finger's FK once, briefly."""
+    from frog_sim.core.rollouts import Rollouts
+    from frog_sim.core.simulation import FrogSimulation
+    from softkin_fk.core.forward import ForwardSolver
+    from softkin_fk.core.models import build_tendon_finger
+    sim = FrogSimulation()
+    sim.set_realism(seed=0, limb_strength_sd=0.1, kick_strength_sd=0.1, yaw_disturbance_sd=1e-5)
+    sim.execute_primitive("A")
+    sim.run(0.1)
+    with Rollouts(threads=1) as rollouts:
+        rollouts.rollout_batch(rollouts.start_from_simulation(sim), [["B"]], period=0.05)
+    ForwardSolver(build_tendon_finger(resolution=1)).solve([1, 1, 0.99], tol=1e-6)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels(request):
+    """The numba kernels compiled once per run, before the first test that runs them.
+
+    They are cached on disk (``cache=True``), but on a fresh clone every process that runs them
+    before the cache exists compiles them too: each worker, and each node, library worker or tool
+    a system test starts (about 90 s of CPU apiece). The first worker compiles them here while
+    the other waits on the lock; then every process loads them from the cache (about 1.5 s of
+    CPU). A failure here only warns: the tests that run the kernels say what is wrong.
+    """
+    if not any(_needs_kernels(item) for item in request.session.items):
+        return
+    with _run_lock(Path(str(request.config.rootpath)) / "runs" / ".kernels.lock"):
+        try:
+            _compile_kernels()
+        except Exception as exc:          # an optimisation: the tests that run the kernels report it
+            warnings.warn(f"compiling the numba kernels before the tests failed: {exc!r}", stacklevel=1)
+
+
+@pytest.fixture(scope="session")
+def motion_library(tmp_path_factory):
+    """``motion_library(n_states, horizon, seed) -> Path``: a motion library generated once per run.
+
+    Each spec is generated once for all workers (the first to ask builds it, under a lock, with a
+    process pool of 2), so modules asking for the same library share it.
+    """
+    folder = _run_folder(tmp_path_factory) / "motion_libraries"
+
+    def get(n_states: int, horizon: float, seed: int) -> Path:
+        from frog_sim.core.motion_library import LibrarySpec, generate_library
+        path = folder / f"library_{n_states}_{horizon:g}_{seed}.npz"
+        with _run_lock(path.with_suffix(".lock")):
+            if not path.exists():
+                generate_library(LibrarySpec(n_states=n_states, horizon=horizon, seed=seed), path, workers=2,
+                                 chunk_size=10, progress=False)
+        return path
+    return get
