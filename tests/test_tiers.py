@@ -65,6 +65,10 @@ def test_long_computation():
     _busy(1.5)
 
 
+def test_noted_computation():
+    _busy(0.7)
+
+
 def test_numba_compilation_is_not_counted():
     import numba
     import numpy as np
@@ -104,7 +108,7 @@ GUARDED = {"test_process": "a process (true) during its call",
            "test_multiprocessing": "a multiprocessing process",
            "test_rclpy_context": "an rclpy context",
            "test_long_computation": "s of CPU (limit 1 s"}
-PASS = {"test_numba_compilation_is_not_counted", "test_quick_tools", "test_nothing_started",
+PASS = {"test_numba_compilation_is_not_counted", "test_quick_tools", "test_nothing_started", "test_noted_computation",
         "test_system_may_start_processes", "test_slow_may_compute"}
 SYSTEM = {"test_system_may_start_processes", "test_slow_may_compute"}
 
@@ -113,7 +117,8 @@ SYSTEM = {"test_system_may_start_processes", "test_slow_may_compute"}
 def suite(tmp_path, ros_domain):          # the rclpy context on a domain of its own
     conftest = (ROOT / "conftest.py").read_text()
     conftest, n = re.subn(r"^FAST_CPU_LIMIT_S = .*$", "FAST_CPU_LIMIT_S = 1.0", conftest, flags=re.M)
-    assert n == 1
+    conftest, m = re.subn(r"^FAST_CPU_NOTE_S = .*$", "FAST_CPU_NOTE_S = 0.5", conftest, flags=re.M)
+    assert n == m == 1
     (tmp_path / "conftest.py").write_text(conftest)
     ini = (ROOT / "pytest.ini").read_text()
     (tmp_path / "pytest.ini").write_text(re.sub(r"^testpaths = .*$", "testpaths = .", ini, flags=re.M))
@@ -140,6 +145,10 @@ def test_the_guard_fails_what_does_not_belong_in_the_fast_tier(suite):
         assert outcomes.get(name) in ("FAILED", "ERROR"), (name, out[-4000:])
         said = rf"test_suite\.py::{name} is in the fast tier but .*{re.escape(words)}"
         assert re.search(said, out), (name, out[-4000:])
+    # a fast test over the note's CPU time is listed at the end, and only such a one
+    listed = out.split("fast-tier tests over")[-1].split("short test summary info")[0]
+    assert re.search(r"^ +0\.[7-9] s  test_suite\.py::test_noted_computation$", listed, flags=re.M), out[-2000:]
+    assert "test_nothing_started" not in listed and "test_slow_may_compute" not in listed
 
 
 def test_fast_and_system_are_the_two_halves(suite):
