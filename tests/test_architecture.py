@@ -112,6 +112,7 @@ print('ok')
 
 
 @pytest.mark.parametrize("pkg", PY_PACKAGES)
+@pytest.mark.system
 def test_core_imports_without_rclpy(pkg):
     r = subprocess.run([sys.executable, "-c", BLOCKER.format(pkg=pkg)], capture_output=True,
                        text=True, timeout=300)

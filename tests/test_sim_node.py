@@ -1,6 +1,7 @@
 """sim_node as a real process: publishes ground truth, executes primitives, rejects bad input."""
 
 import math
+import re
 
 import pytest
 from nav_msgs.msg import Odometry
@@ -221,6 +222,7 @@ def test_a_stalled_process_continues_without_racing_to_catch_up(launch, probe):
     probe.node.create_subscription(Clock, "/clock", lambda m: clock.append((time.monotonic(), _t(m.clock))), 100)
     probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
     probe.spin_until(lambda: clock and clock[-1][1] > 1.5, 120, "1.5 s of simulated time")
+    logged_before = len(sim.log_text())       # a loaded machine may have made it lag already
     os.kill(sim.pid, signal.SIGSTOP)
     try:
         probe.spin_for(0.3)                     # what was under way arrives
@@ -236,8 +238,14 @@ def test_a_stalled_process_continues_without_racing_to_catch_up(launch, probe):
     assert max(t for w, t in after if w <= 1.0) < 1.0 + 0.5 + 0.2, after[:20]
     # and it does go on at about real time
     assert 1.2 < max(t for w, t in after if w <= 2.0) < 2.0 + 0.5 + 0.2, after[-5:]
-    line = sim.wait_for_log(r"fell (\d+\.\d+) s behind the wall clock", timeout=10)
-    assert 1.8 < float(line.group(1)) < 3.0, line.group(0)
+
+    def lags():
+        log = sim.log_text()[logged_before:]
+        return [float(x) for x in re.findall(r"fell (\d+\.\d+) s behind the wall clock", log)]
+    deadline = time.monotonic() + 10
+    while not any(lag > 1.8 for lag in lags()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert any(1.8 < lag < 3.0 for lag in lags()), lags()      # the stall's lag
     probe.spin_until(lambda: any(kv.key == "lags_dropped" and kv.value != "0"
                                  for d in diags for s in d.status for kv in s.values), 5, "lags_dropped > 0")
     assert sim.stop() == 0

@@ -20,6 +20,7 @@ def _cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / 100.0       # utime + stime, clock ticks (USER_HZ 100)
 
 
+@pytest.mark.system
 def test_busy_processes_spin_and_are_stopped():
     busy = sul.start_busy(2)
     try:
@@ -33,6 +34,7 @@ def test_busy_processes_spin_and_are_stopped():
     assert all(p.poll() is not None for p in busy)
 
 
+@pytest.mark.system
 def test_run_once_reports_exit_code_wall_and_cpu_time(tmp_path):
     log = tmp_path / "run.log"
     code, wall, cpu = sul.run_once([sys.executable, "-c",
@@ -72,6 +74,7 @@ def _ignore_sigint():
 
 
 @pytest.mark.parametrize("case", ["plain", "started-with-SIGINT-ignored", "a-test-ignoring-SIGINT"])
+@pytest.mark.system
 def test_sigterm_stops_the_run_and_the_busy_processes(tmp_path, case):
     """``kill`` (SIGTERM) of the driver mid-run: the run under way is stopped (pytest too, under
     ./dev's shell), the busy process does not spin on, and the summary is still written. Also when

@@ -40,6 +40,7 @@ def test_the_sequence_swims_and_turns(swim):
     assert truth.twist[:, 0].max() > 0.02
 
 
+@pytest.mark.slow
 def test_clean_frames_at_the_authors_geometry(swim):
     m = _run(swim, noise_sigma=2.0).metrics()
     assert m["detection_rate"] >= 0.99
@@ -50,6 +51,7 @@ def test_clean_frames_at_the_authors_geometry(swim):
 # rate 0 -> 20-45 deg/s in 2-3 frames, with frame-to-frame wobble), even differences of the EXACT
 # poses err by 3.3 mm/s and 3.3 deg/s RMS over this sequence (5.6 / 5.9 inside the strokes):
 # no causal estimate from 30 fps poses can beat raw differences by 5x in yaw rate here.
+@pytest.mark.slow
 def test_filter_with_kick_inputs_beats_raw_differences_at_the_authors_noise(swim):
     m = _run(swim, noise_sigma=5.0, corner_jitter_px=0.2).metrics()
     assert m["position_mean_mm"] <= 1.0
@@ -60,6 +62,7 @@ def test_filter_with_kick_inputs_beats_raw_differences_at_the_authors_noise(swim
     assert m["yaw_rate_ratio"] >= 1.5, m
 
 
+@pytest.mark.slow
 def test_filter_without_kick_inputs_the_lower_bound(swim):
     """The same without the firing times (a camera-only tracker): the constant-twist filter."""
     with_kicks = _run(swim, noise_sigma=5.0, corner_jitter_px=0.2).metrics()
@@ -72,6 +75,7 @@ def test_filter_without_kick_inputs_the_lower_bound(swim):
     assert with_kicks["velocity_rms_mm_s"] < m["velocity_rms_mm_s"]
 
 
+@pytest.mark.slow
 def test_recovers_within_3_frames_after_1_s_hidden(swim):
     res = _run(swim, occlusion=[(3.0, 4.0)], noise_sigma=3.0)
     assert not res.detected[res.occluded].any()

@@ -98,6 +98,7 @@ def test_tight_stretches_are_where_the_arc_was_placed():
     assert r == pytest.approx(0.05, rel=0.02) and side == 1
 
 
+@pytest.mark.slow
 def test_floor_of_a_feasible_arc_is_zero_and_the_straight_cut_matches_quadrature():
     R, phi = 0.2, math.pi / 2
     path = arc_path(R, phi)
@@ -113,6 +114,7 @@ def test_floor_of_a_feasible_arc_is_zero_and_the_straight_cut_matches_quadrature
     assert rigid.mean_distance_m == pytest.approx(expected, rel=0.01)
 
 
+@pytest.mark.slow
 def test_floor_of_the_paper_sine_grows_with_the_turning_circle_up_to_the_straight_cut():
     path = sinusoid_path()
     floors = [turning_limited_floor(path, TurningLimits(r, r, ())) for r in (0.01, 0.073, 0.2, math.inf)]

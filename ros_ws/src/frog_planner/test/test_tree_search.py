@@ -96,7 +96,8 @@ def tiny(synthetic):
 
 @pytest.mark.parametrize("depth, metric, k", [(1, "euclidean", 1), (2, "euclidean", 1), (3, "euclidean", 1),
                                               (2, "relative", 1), (3, "relative", 1), (2, "euclidean", 2),
-                                              (2, "relative", 3), (4, "euclidean", 1)])
+                                              (2, "relative", 3),
+                                              pytest.param(4, "euclidean", 1, marks=pytest.mark.slow)])
 def test_search_matches_brute_force(tiny, depth, metric, k):
     states, table = tiny
     model = TransitionModel(states, table, list("ABCDEFGHI"), metric=metric, k=k)

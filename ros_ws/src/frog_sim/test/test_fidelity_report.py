@@ -20,6 +20,7 @@ def synthetic_runs(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_the_model_reproduces_its_own_logs(synthetic_runs, tmp_path, monkeypatch):
     monkeypatch.setenv("FROG_DATA_DIR", str(synthetic_runs.parent))
     cfg = FidelityConfig(runs=("line1", "sin1"), speeds=False, tag_offset_deg=-6.0, coast_duration=5.0,

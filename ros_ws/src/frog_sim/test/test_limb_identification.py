@@ -53,6 +53,7 @@ def test_last_firings_are_what_fired_up_to_now():
 
 
 @pytest.mark.parametrize("lead", [0.0, 0.3])
+@pytest.mark.slow
 def test_the_limbs_of_a_simulated_robot_are_found(rollouts, lead):
     """Twenty periods of turning and straight kicks: each limb's estimate within 0.06 of the truth
     (a prior of 1 +- 0.1; the sd says how sure it is), and the rollouts believe in it."""
@@ -68,6 +69,7 @@ def test_the_limbs_of_a_simulated_robot_are_found(rollouts, lead):
     assert rollouts.limb_strength == pytest.approx(ident.strengths)
 
 
+@pytest.mark.slow
 def test_the_limbs_are_found_while_estimating_a_tank_torque_too(rollouts):
     """rollout_node's default: the filter also carries the tank's yaw torque. In a calm tank the
     limbs are still found within 0.06 (a lasting turn is the limbs', not the torque's, which

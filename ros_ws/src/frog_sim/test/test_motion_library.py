@@ -65,12 +65,14 @@ def test_states_at_t0_reproduce_sampled_velocities(reference):
     assert err < 1e-6, f"round-trip error {err:.2e} (float32 storage ~1e-9 m/s)"
 
 
+@pytest.mark.system
 def test_process_pool_gives_identical_file(reference, tmp_path):
     out = generate_library(LibrarySpec(**SMALL), tmp_path / "pool.npz", workers=2,
                            chunk_size=1, progress=False)
     _same_library(reference, out)
 
 
+@pytest.mark.system
 def test_dask_local_cluster_gives_identical_file(reference, tmp_path):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
@@ -80,6 +82,7 @@ def test_dask_local_cluster_gives_identical_file(reference, tmp_path):
     _same_library(reference, out)
 
 
+@pytest.mark.system
 def test_resume_after_killed_run_gives_identical_file(reference, tmp_path):
     out = tmp_path / "resumed.npz"
     code = (f"from frog_sim.core.motion_library import LibrarySpec, generate_library\n"

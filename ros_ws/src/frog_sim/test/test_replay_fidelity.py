@@ -46,6 +46,7 @@ def _ratios(params, wins):
 
 
 @pytest.mark.parametrize("fold", range(3))
+@pytest.mark.slow
 def test_held_out_runs_turn_as_the_robot_over_three_periods(windows, fold):
     rec = _record()["cross_validation"][fold]
     held = [w for w in windows if w.run in rec["held_out"]]

@@ -34,6 +34,7 @@ def test_grid_covers_every_measured_pair_and_phase():
     assert sorted({p for _, _, p in grid}) == pytest.approx(np.arange(0, 0.95, 0.1))
 
 
+@pytest.mark.slow
 def test_calibration_recovers_a_known_drag_coefficient(tmp_path):
     """Synthetic 'measurements' made with C_bn = 1.2 outside the grid code path."""
     truth, freqs = 1.2, [0.8, 1.0]

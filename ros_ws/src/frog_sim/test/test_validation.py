@@ -7,6 +7,7 @@ from frog_sim.core.model_parameters import FrogParameters
 from frog_sim.studies import displacement_after_cycles, measured_speeds, speed_validation
 
 
+@pytest.mark.slow
 def test_steady_speed_matches_calibration_runs(measured_file):
     """10 % EGaIn, phase 0.5, 0.4-1.1 Hz vs the measured runs (paper: good agreement).
     Measured speeds rise from ~22 to ~56 mm/s; the model must follow within 5 mm/s RMS (the
@@ -32,6 +33,7 @@ def test_measured_speeds_read_from_the_data_file(measured_file):
     assert 0.018 < m[0.4]["long"] < 0.028 and 0.05 < m[1.1]["long"] < 0.06
 
 
+@pytest.mark.slow
 def test_time_step_refinement_converges():
     """Halving dt from 0.5 ms changes the 3-cycle displacement by shrinking amounts that
     approach first order (ratio of successive changes -> 1/2 for backward Euler). Above

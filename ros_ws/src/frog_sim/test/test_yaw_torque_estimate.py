@@ -160,6 +160,7 @@ def _prediction_errors(seed, primitives, torque_sd=0.0, oracle=False):
     return np.array(errors[3:]), ident      # after a few periods of learning
 
 
+@pytest.mark.slow
 def test_the_estimated_torque_predicts_the_next_period_better():
     """Three robots (seeds) swimming 16 periods of straight and turning kicks in the twin's tank
     torque: the RMS heading error one period ahead with the estimated torque gains at least half

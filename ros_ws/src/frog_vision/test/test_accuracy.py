@@ -8,6 +8,8 @@ from frog_vision.core.renderer import RenderSettings, TankRenderer
 from frog_vision.core.synthetic import swim_and_turn
 from frog_vision.core.tracker import Tracker
 
+pytestmark = pytest.mark.slow     # each test renders and tracks 180 frames
+
 
 @pytest.fixture(scope="module")
 def swim():

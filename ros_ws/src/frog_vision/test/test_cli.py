@@ -16,6 +16,7 @@ def _rows(path):
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 def test_render_then_track_round_trip(tmp_path):
     out = tmp_path / "r"
     assert main(["render", "--duration", "2", "-o", str(out), "--png"]) == 0

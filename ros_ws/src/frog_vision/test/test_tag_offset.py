@@ -26,6 +26,7 @@ def straight_swim(offset, duration=30.0, rate=30.0, seed=0, noise=(0.0003, math.
 
 
 @pytest.mark.parametrize("offset", [(0.0034, 0.0, math.radians(5.6)), (-0.004, 0.003, math.radians(-3.0))])
+@pytest.mark.slow
 def test_known_offset_is_recovered(offset):
     t, tag = straight_swim(offset)
     r = estimate_tag_offset(t, tag)
@@ -41,6 +42,7 @@ def test_turning_log_is_refused():
         estimate_tag_offset(t, tag)
 
 
+@pytest.mark.system
 def test_cli_writes_the_file_the_twin_reads(tmp_path):
     offset = (0.0034, 0.002, math.radians(5.6))
     t, tag = straight_swim(offset, seed=3)
@@ -92,6 +94,7 @@ float64 w 1
 """
 
 
+@pytest.mark.system
 def test_cli_reads_the_trackers_pose_from_an_mcap(tmp_path):
     from mcap_ros2.writer import Writer
     offset = (0.0034, -0.002, math.radians(-4.0))

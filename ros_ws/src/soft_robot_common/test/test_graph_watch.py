@@ -8,6 +8,8 @@ import pytest
 from soft_robot_common.graph_watch import GraphWatch
 from soft_robot_common.processes import acquire_domain
 
+pytestmark = pytest.mark.system
+
 
 class _Dead:
     name = "tracker_node"

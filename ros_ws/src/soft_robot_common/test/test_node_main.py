@@ -9,6 +9,10 @@ import sys
 import textwrap
 import time
 
+import pytest
+
+pytestmark = pytest.mark.system
+
 SCRIPT = textwrap.dedent("""
     import ctypes, sys, time
     from rclpy.node import Node

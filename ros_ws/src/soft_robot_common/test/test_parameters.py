@@ -32,6 +32,7 @@ def _node(context, overrides=(), name="param_test"):
     return node
 
 
+@pytest.mark.system
 def test_descriptors_carry_ranges_choices_and_read_only(context):
     node = _node(context)
     gain, count, mode, legacy = node.describe_parameters(["gain", "count", "mode", "legacy"])
@@ -42,6 +43,7 @@ def test_descriptors_carry_ranges_choices_and_read_only(context):
     node.destroy_node()
 
 
+@pytest.mark.system
 def test_live_sets_are_checked_then_applied(context):
     node = _node(context)
     assert node.set_parameters([Parameter("gain", value=0.5)])[0].successful
@@ -62,6 +64,7 @@ def test_live_sets_are_checked_then_applied(context):
     (Parameter("count", value=0), "below its minimum 1"),
     (Parameter("gain", value=1.9), None),          # accepted alone ...
 ])
+@pytest.mark.system
 def test_start_up_values_are_checked(context, override, words):
     if words is None:
         node = _node(context, [override])
@@ -72,11 +75,13 @@ def test_start_up_values_are_checked(context, override, words):
         _node(context, [override])
 
 
+@pytest.mark.system
 def test_cross_check_at_start_up(context):
     with pytest.raises(ConfigurationError, match="gain must be below count"):
         _node(context, [Parameter("gain", value=1.5), Parameter("count", value=1)])
 
 
+@pytest.mark.system
 def test_undeclared_overrides_name_the_closest_parameter(context):
     node = _node(context, [Parameter("gian", value=1.0), Parameter("zzz_unrelated", value=1)])
     assert undeclared_overrides(node) == [("gian", "gain"), ("zzz_unrelated", None)]

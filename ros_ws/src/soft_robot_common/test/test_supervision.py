@@ -25,6 +25,7 @@ def _poll_until(sup, predicate, timeout=10.0):
     raise TimeoutError("condition not reached")
 
 
+@pytest.mark.system
 def test_killed_node_is_restarted_after_its_backoff_and_the_backoff_doubles(tmp_path):
     sup = Supervisor(RestartPolicy(max_restarts=2, backoff_s=0.3, backoff_max_s=5.0), log=lambda s: None)
     sup.add("a", _sleeper(tmp_path, "a"), lambda label: _sleeper(tmp_path, label))
@@ -52,6 +53,7 @@ def test_killed_node_is_restarted_after_its_backoff_and_the_backoff_doubles(tmp_
     assert not any(p.running() for p in sup.processes())
 
 
+@pytest.mark.system
 def test_essential_node_is_not_restarted(tmp_path):
     sup = Supervisor(RestartPolicy(backoff_s=0.0), essential={"world"}, log=lambda s: None)
     sup.add("world", _sleeper(tmp_path, "world"), lambda label: _sleeper(tmp_path, label))
@@ -69,6 +71,7 @@ def test_essential_node_is_not_restarted(tmp_path):
     assert sup.unclean_stops() == ["other"], "exit 3 on SIGINT is unclean; the world's exit is the stop reason"
 
 
+@pytest.mark.system
 def test_a_node_waiting_for_its_restart_at_the_stop_is_not_an_unclean_stop(tmp_path):
     """Session 31: a recorder killed as deaf 2 s before the goal, its restart due in 4 s, made the run
     'failed' for an unclean stop; its process had ended before the stop, and the event says why."""
@@ -98,6 +101,7 @@ def _ready(folder, process) -> bool:
     return (folder / f"{process.name}.ready").exists()
 
 
+@pytest.mark.system
 def test_a_node_that_never_gets_ready_is_killed_and_restarted(tmp_path):
     """A restarted process that never says it is ready counts as hung: SIGKILL,
     then the normal restart; a restart that does get ready is left alone past the timeout.
@@ -134,6 +138,7 @@ def test_a_node_that_never_gets_ready_is_killed_and_restarted(tmp_path):
         sup.stop_all(warn=lambda s: None)
 
 
+@pytest.mark.system
 def test_a_node_out_of_restarts_that_hangs_ends_the_run(tmp_path):
     sup = Supervisor(RestartPolicy(max_restarts=1, backoff_s=0.0), log=lambda s: None)
     sup.add("tracker", _sleeper(tmp_path, "tracker"), lambda label: _sleeper(tmp_path, label),
@@ -149,6 +154,7 @@ def test_a_node_out_of_restarts_that_hangs_ends_the_run(tmp_path):
     assert sup.unclean_stops() == [], "its exit is the stop reason, not an unclean stop at the end"
 
 
+@pytest.mark.system
 def test_a_node_is_recovering_from_its_exit_until_its_restart_is_ready(tmp_path):
     starts = []
 
@@ -185,6 +191,7 @@ def test_a_node_is_recovering_from_its_exit_until_its_restart_is_ready(tmp_path)
         sup.stop_all(warn=lambda s: None)
 
 
+@pytest.mark.system
 def test_a_running_node_found_hung_by_the_caller_is_killed_and_restarted(tmp_path):
     sup = Supervisor(RestartPolicy(max_restarts=1, backoff_s=0.1), log=lambda s: None)
     sup.add("tracker", _sleeper(tmp_path, "tracker"), lambda label: _sleeper(tmp_path, label))
@@ -203,6 +210,7 @@ def test_a_running_node_found_hung_by_the_caller_is_killed_and_restarted(tmp_pat
         sup.stop_all(warn=lambda s: None)
 
 
+@pytest.mark.system
 def test_a_slow_but_clean_stop_is_mentioned_and_stays_clean(tmp_path):
     slow = ("import signal, sys, time\n"
             "def bye(*a):\n    time.sleep(3.5)\n    sys.exit(0)\n"

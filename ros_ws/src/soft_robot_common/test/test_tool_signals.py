@@ -46,6 +46,7 @@ def _gone(pid, timeout):
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="prctl(PR_SET_PDEATHSIG) is Linux's")
+@pytest.mark.system
 def test_a_node_gets_sigterm_when_the_tool_that_started_it_is_killed(tmp_path):
     log = tmp_path / "child.log"
     tool = subprocess.Popen([sys.executable, "-c", TOOL, CHILD, str(log)], stdout=subprocess.PIPE, text=True)
@@ -60,6 +61,7 @@ def test_a_node_gets_sigterm_when_the_tool_that_started_it_is_killed(tmp_path):
         tool.kill()
 
 
+@pytest.mark.system
 def test_a_node_started_without_its_parent_alive_stops_at_once(tmp_path):
     # with its parent (this test) alive, the child runs on
     p = NodeProcess([sys.executable, "-c", CHILD], dict(os.environ), tmp_path / "c.log", "child")
@@ -80,6 +82,7 @@ def test_a_node_started_without_its_parent_alive_stops_at_once(tmp_path):
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+@pytest.mark.system
 def test_sigterm_and_sighup_stop_a_tool_like_ctrl_c(sig):
     tool = textwrap.dedent("""
         import time

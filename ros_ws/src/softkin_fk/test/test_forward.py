@@ -127,6 +127,7 @@ def test_energy_never_increases(method, accelerate):
     assert np.all(np.diff(e) <= 1e-13 * e[0])
 
 
+@pytest.mark.slow
 def test_agrees_with_libigl_arap():
     """Pure body elements (R_w = 1) with handles vs libigl's ARAP (per-element energy).
 

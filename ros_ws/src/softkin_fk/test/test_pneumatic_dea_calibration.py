@@ -52,6 +52,7 @@ def test_ideal_gas_volume_ratio_inverts_eq18():
         volume_ratio_from_pressure(-1.0, 0.0, Vc0, Vsy0, Vt)
 
 
+@pytest.mark.slow
 def test_equal_materials_give_unit_elasticity_ratio_and_calibration_is_monotone():
     assert simulated_elasticity_ratio(1.0, 1.0) == pytest.approx(1.0, rel=1e-6)
     soft = calibrate_shape_parameter(5.68, rel_tol=1e-2)

@@ -88,6 +88,7 @@ def test_builtin_curves_reached_at_default_resolution():
 
 
 @pytest.mark.parametrize("jacobian", ["central", "implicit"])
+@pytest.mark.slow
 def test_L_start_is_reached_from_the_configuration_space(jacobian):
     """Algorithm 3 on the first 'L' waypoints at the default resolution. From the nearest
     sample the IK used to stall at 0.39 mm on waypoint 0 (a cable at its rest length, s = 1,
