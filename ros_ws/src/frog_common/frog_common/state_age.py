@@ -7,12 +7,13 @@ hardware, refuses to write a pulse whose state is older than that at the write, 
 planner did. A command without a state stamp is its own state (its header stamp, or now).
 
 The default follows from the loop's own timing (docs/faults.md, "How old a state may be"):
-a frame is captured every 33 ms (30 Hz), the tracker publishes its pose some tens of ms
-later, the planner decides at its period tick on the newest pose (up to one frame interval
-older than the tick), and the rear limbs fire one pulse (80 ms) after the front. On the
-twin the age of the state at a pulse's write had a median of 0.07 s and a maximum of
-0.21 s on a loaded 2-core machine; 0.5 s leaves room for a slow decision without letting a
-pose the robot has since left (3 cm/s, 30 deg/s: 1.5 cm, 15 deg) drive a limb.
+the planner decides on the newest pose (up to one frame interval, 33 ms at 30 Hz, old at its
+tick), the tracker adds its capture-to-pose latency, the decision takes its time, and the rear
+limbs fire one pulse (80 ms) after the front. In the twin on 2 shared cores
+(``./dev bench state_age``) a pulse's state was 0.20-0.22 s old in the median and 0.46-0.48 s
+at the 99th percentile; 0.5 s sits just above that, and a pose 0.5 s old puts the frog
+(3 cm/s, 30 deg/s) 1.5 cm and 15 deg from where the planner believes it is, a third of one
+period's motion.
 """
 
 from __future__ import annotations

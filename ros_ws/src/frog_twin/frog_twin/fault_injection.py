@@ -29,6 +29,9 @@ TRACKER_STATES = ("searching", "tracking", "coasting", "lost", "frozen")
 #: History of the watch's subscriptions: 5000 odometry messages are 2.8 min at 30 Hz.
 WATCH_DEPTH = 5000
 
+#: The nodes that publish frog/odom: the tracker, or the simulator without vision.
+POSE_PUBLISHERS = ("tracker_node", "sim_node")
+
 
 def _stamp(msg) -> float:
     return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
@@ -53,6 +56,7 @@ class RunObserver:
         self.sim_now = None
         self.recorder_up = []           # [(sim t0, sim t1)] with the recorder subscribed to CHECKED_TOPICS
         self.restarts = []              # sim times of node restarts (see discovery_gaps)
+        self.pose_restarts = []         # sim times of restarts of a node that publishes frog/odom (pose_gaps)
         self.resubscription = Resubscription(CHECKED_TOPICS)    # a restarted recorder's own subscriptions
         self._up_since = None
         self._unready_since = None      # sim time of the recorder's restart, until it is ready
@@ -135,6 +139,8 @@ class RunObserver:
     def node_restarted(self, name: str) -> None:
         if self.sim_now is not None:
             self.restarts.append(self.sim_now)
+            if name in POSE_PUBLISHERS:
+                self.pose_restarts.append(self.sim_now)
             if name == "recorder":
                 self._close_unready()        # its predecessor was killed or exited before it got ready
                 self._unready_since = self.sim_now
@@ -152,6 +158,12 @@ class RunObserver:
         own = self.resubscription.gaps(DISCOVERY_S)
         return {topic: restart_windows(self.restarts, stamps, DISCOVERY_S) + own[topic]
                 for topic, stamps in self.seen.items()}
+
+    def pose_gaps(self) -> list:
+        """[(t0, t1)] of sim time where the recording may lack poses although the robot had them: from each
+        restart of the pose's publisher to DISCOVERY_S after the first pose this watch saw from it (the
+        recorder matches a restarted publisher only after discovery)."""
+        return restart_windows(self.pose_restarts, self.obs.odom, DISCOVERY_S)
 
     def watch_recorder_subscriptions(self) -> None:
         """Called every poll: the recorder's subscription endpoints on the checked topics (graph)."""

@@ -28,7 +28,6 @@ import sys
 import time
 from pathlib import Path
 
-from frog_common.state_age import MAX_STATE_AGE_S
 from frog_twin.core.faults import CAMPAIGN_MOMENTS, FaultSpecError, parse_faults
 
 #: the signals of the campaign: every node of the vision-to-decision chain killed and stopped 5 s,
@@ -90,7 +89,6 @@ def run_with_signals(path: str, plan, out: Path, library: Path, seed: int = 1, e
     """One ``frog-twin`` run on ``path`` with the signals of ``plan`` sent from here; its record."""
     from soft_robot_common.processes import acquire_domain
 
-    from frog_twin.core.twin_recording import read_pulse_ages
     out.mkdir(parents=True, exist_ok=True)
     domain = acquire_domain()
     cmd = [sys.executable, "-m", "frog_twin.twin", "--path", path, "--library", str(library), "--seed", str(seed),
@@ -141,10 +139,9 @@ def run_with_signals(path: str, plan, out: Path, library: Path, seed: int = 1, e
     if code != 0 or not metrics_file.exists():
         return dict(record, outcome="failed", stop_reason=f"frog-twin exited {code} (see {out / 'twin.log'})")
     (m,) = json.loads(metrics_file.read_text())
-    ages = read_pulse_ages(m["recording"], MAX_STATE_AGE_S)
-    stale = ages.stale()
+    stale = m["stale_pulses"]       # the twin's audit of its recording (frog_twin.core.state_audit)
     outcome = "failed" if stale or m["unclean_stops"] else "completed" if m["goal_reached"] else "stopped"
-    return dict(record, outcome=outcome, stop_reason=m["stop_reason"], pulse_ages=ages.summary(), stale_pulses=stale,
+    return dict(record, outcome=outcome, stop_reason=m["stop_reason"], pulse_ages=m["pulse_ages"], stale_pulses=stale,
                 restarts=m["supervision"]["restarts"], verdicts=m.get("liveness_verdicts", []))
 
 
@@ -170,18 +167,20 @@ def table(records) -> str:
         for label in r["plan"]:
             kind = label.split("@")[0]
             row = rows.setdefault(kind, {"runs": 0, "completed": 0, "stopped": 0, "failed": 0, "pulses": 0,
-                                         "stale": 0, "oldest": 0.0})
+                                         "stale": 0, "oldest": 0.0, "received": 0.0})
             row["runs"] += 1
             row[r["outcome"]] += 1
             ages = r.get("pulse_ages") or {}
             row["pulses"] += ages.get("pulses", 0)
             row["stale"] += len(r.get("stale_pulses", []))
             row["oldest"] = max(row["oldest"], (ages.get("published") or {}).get("max", 0.0))
+            row["received"] = max(row["received"], (ages.get("received") or {}).get("max", 0.0))
     lines = ["| signal | runs | completed | stopped with a reason | failed | pulses | pulses on stale state | "
-             "oldest state at a pulse [s] |", "|---|---|---|---|---|---|---|---|"]
+             "oldest state at a pulse [s]: by publish times | by receive times |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for kind, r in rows.items():
         lines.append(f"| {kind} | {r['runs']} | {r['completed']} | {r['stopped']} | {r['failed']} | {r['pulses']} | "
-                     f"{r['stale']} | {r['oldest']:.3f} |")
+                     f"{r['stale']} | {r['oldest']:.3f} | {r['received']:.3f} |")
     return "\n".join(lines)
 
 

@@ -72,6 +72,7 @@ from frog_twin.core.faults import FaultSpecError, check_against_graph, fault_rep
 # the realism defaults of the twin (each switchable; see --help)
 from frog_twin.core.realism import (HARDWARE_PERIOD_S, KICK_STRENGTH_SD, LIMB_STRENGTH_SD, YAW_DISTURBANCE_SD,
                                     YAW_DISTURBANCE_TAU_S)
+from frog_twin.core.state_audit import complete_intervals
 from frog_twin.core.twin_recording import (read_pulse_ages, read_twin_recording, readable_files, recorded_stamps,
                                             recordings, run_files)
 from frog_twin.fault_injection import CHECKED_TOPICS, FaultInjector, RunObserver
@@ -347,7 +348,10 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
                    unclean_stops=run.supervisor.unclean_stops())
     # the design's bound, not the run's: a run that raises its nodes' bound is audited against it too
     ages = read_pulse_ages(files, MAX_STATE_AGE_S)
+    # the recorded poses judge a pulse only where the recording is complete
+    ages.complete = complete_intervals(observer.recorder_up, observer.pose_gaps())
     metrics["pulse_ages"] = ages.summary()
+    metrics["stale_pulses"] = ages.stale()
     if faults:
         metrics["faults"] = fault_report(faults, observer, sim_start, injector,
                                          recorded_stamps(files, CHECKED_TOPICS), ages, goal, stop_reason,

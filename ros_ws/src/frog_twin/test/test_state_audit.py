@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from frog_twin.core.state_audit import measured_poses, pulse_ages
+from frog_twin.core.state_audit import complete_intervals, measured_poses, pulse_ages
 
 
 def _odom(t0, t1, rate=30.0, latency=0.04, offset=1000.0):
@@ -77,3 +77,13 @@ def test_receive_order_across_topics_is_reported_not_judged():
     odom = [(s, p, r + (5.0 if s > 3.0 else 0.0)) for s, p, r in _odom(0.0, 6.0)]
     ages = pulse_ages([_pulse(5.5)], measured_poses(odom), 0.5)
     assert ages.received[0] > 2.0 and ages.published[0] < 0.1 and ages.stale() == []
+
+
+def test_the_recording_is_complete_while_the_recorder_is_up_and_has_matched_the_tracker():
+    # recorder up 0-20 s and 25-40 s (1 s margins for its subscriptions); a restarted tracker
+    # unmatched 8-11 s, and another 19-27 s over the recorder's restart
+    assert complete_intervals([(0.0, 20.0), (25.0, 40.0)], [(8.0, 11.0), (19.0, 27.0)]) == \
+        [(1.0, 8.0), (11.0, 19.0), (27.0, 40.0)]
+    assert complete_intervals([(0.0, 0.5)], []) == []               # up for less than the margin
+    assert complete_intervals([(0.0, 10.0)], [(-5.0, 20.0)]) == []  # a hole over all of it
+    assert complete_intervals([(0.0, 10.0)], [(12.0, 14.0)]) == [(1.0, 10.0)]

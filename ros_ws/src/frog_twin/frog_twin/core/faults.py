@@ -318,11 +318,9 @@ def fault_report(faults, observer, sim_start: float, injector, recorded: dict, p
     """The fault section of a run's metrics: outcome, pulses on stale state, recorder losses, recovery.
 
     ``pulse_ages``: the recording's :class:`~frog_twin.core.state_audit.PulseAges` (the state
-    behind every pulse, by publish times and by the bridge's own record)."""
+    behind every pulse, by publish times and by the bridge's own record; its ``complete`` intervals set)."""
     obs = observer.obs
     shifted = [replace(f, at=f.at + sim_start) for f in faults]
-    # the recorded poses judge a pulse only while the recorder was up (1 s margins: its subscriptions)
-    pulse_ages.complete = [(a + 1.0, b) for a, b in observer.recorder_up if b > a + 1.0]
     stale = pulse_ages.stale()
     gaps = observer.discovery_gaps()
     losses = recorder_losses(observer.seen, recorded, observer.recorder_up, excluded=gaps)

@@ -9,9 +9,10 @@ pose's capture stamp, both on the node clock the bound is defined on (simulated 
 so a paused or slowed world does not count as age). It also reads the age the
 bridge itself recorded (``LimbActivation.state_age``): that needs no trust in the planner. A
 pulse is on a stale state if the bridge's record exceeds the bound, or, where the recording is
-known to be complete (the recorder up; a whole run when nothing stopped it), if the recorded
-poses say so. Without tracker states in the recording (odometry from the simulator), every
-odometry message is a measurement.
+known to be complete (the recorder up, and not in the seconds after a restarted tracker before
+the recorder has matched it: :func:`complete_intervals`), if the recorded poses say so. Without
+tracker states in the recording (odometry from the simulator), every odometry message is a
+measurement.
 """
 from __future__ import annotations
 
@@ -64,6 +65,25 @@ class PulseAges:
         return {"pulses": self.n, "bound_s": self.bound_s, "stale": len(self.stale()), "judged": int(judged.sum()),
                 "published": stat(self.published[judged]), "received": stat(self.received[judged]),
                 "claimed": stat(self.claimed)}
+
+
+def complete_intervals(up, holes, margin: float = 1.0) -> list:
+    """[(t0, t1)] where a recording is complete: each interval of ``up`` (the recorder up; its first
+    ``margin`` s left out, while its subscriptions match) without the ``holes`` (after a restarted
+    publisher, until the recorder has matched it)."""
+    out = [(a + margin, b) for a, b in up if b > a + margin]
+    for h0, h1 in sorted(holes):
+        cut = []
+        for a, b in out:
+            if h1 <= a or h0 >= b:
+                cut.append((a, b))
+                continue
+            if h0 > a:
+                cut.append((a, h0))
+            if h1 < b:
+                cut.append((h1, b))
+        out = cut
+    return out
 
 
 def measured_poses(odom, states=None):
