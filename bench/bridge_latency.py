@@ -8,7 +8,7 @@ this process's ``time.perf_counter``. The same hops are timed through a bare rcl
 at the same time on its own pty and namespace, samples alternating between the two, so both
 see the same machine load; the ratio says what the bridge's framing, protection and
 scheduling cost.
-Target (issue 13): median <= 2 ms, p99 <= 5 ms for both directions.
+Target: median <= 2 ms, p99 <= 5 ms for both directions.
 
     ./dev bench bridge_latency [--samples 300] [--rate 10]
 """

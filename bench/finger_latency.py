@@ -1,4 +1,4 @@
-"""kinematics_node latencies (issue 15): IK/FK service round trips and 'L' through the action.
+"""kinematics_node latencies: IK/FK service round trips and 'L' through the action.
 
 Starts ``kinematics_node`` (default finger, resolution 2, 5^3 configuration samples) as a
 process on an isolated domain and measures, from a client in this process:

@@ -1,4 +1,4 @@
-"""Table II investigation (issue 15): what moves the calibrated R_w^A / R_w^B of eq. 16.
+"""Table II investigation: what moves the calibrated R_w^A / R_w^B of eq. 16.
 
 ``softkin calibrate`` gives R_w^A / R_w^B = 5.46 and 8.75 for R_m = 3.75 and 5.68, the paper
 7.08 and 10.30. This script recalibrates under one change at a time and prints the ratios

@@ -3,7 +3,7 @@
 Generates (1) a small library with 1 and with 2 local workers (scaling), and (2) a slice of
 the paper-size library (default 10 %: 850 of 8503 states = 7,650 transitions, 3 s
 horizon) with all workers, then projects the wall time of the full 76,527 transitions.
-Targets (issue 4): paper size <= 60 min on this 2-core machine, stretch <= 20 min.
+Targets: paper size <= 60 min on this 2-core machine, stretch <= 20 min.
 
     ./dev bench frog_library_throughput                  # 10 % slice (~10+ minutes)
     ./dev bench frog_library_throughput --slice-states 100 --scaling-states 20   # quick look

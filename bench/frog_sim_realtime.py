@@ -1,4 +1,4 @@
-"""Real-time factor of one frog simulation on one core (issue 3, Performance).
+"""Real-time factor of one frog simulation on one core.
 
 Frog with 10 % EGaIn limbs swimming the 1 Hz gait (phase 0.5) at the default time
 step and resolution. Measures, in the same run:
@@ -260,7 +260,7 @@ def main() -> None:
 
     n_steps = int(round(args.sim_seconds / dt))
     rtf, rtf_cpu, per_step, iters, facts = [], [], [], [], []
-    rtf0, rtf0_cpu = [], []     # the same without the lumped body damping (issue 18), interleaved
+    rtf0, rtf0_cpu = [], []     # the same without the lumped body damping, interleaved
     for _ in range(args.repeats):
         sim = fresh_sim(undamped)
         t0, c0 = time.perf_counter(), time.process_time()
@@ -307,7 +307,7 @@ def main() -> None:
           f'(wall min {min(rtf):.1f}x, max {max(rtf):.1f}x) over {args.repeats} x {args.sim_seconds:g} sim s; '
           f'{med(per_step):.1f} us/step (wall), {med(iters):.2f} Newton iterations/step, '
           f'{med(facts):.2f} LU factorisations/step')
-    print(f'  without the lumped body damping (issue 18), same run: {med(rtf0_cpu):.1f}x by CPU time, '
+    print(f'  without the lumped body damping, same run: {med(rtf0_cpu):.1f}x by CPU time, '
           f'{med(rtf0):.1f}x by wall time; with / without {med(rtf_cpu) / med(rtf0_cpu):.3f} (CPU), '
           f'{med(rtf) / med(rtf0):.3f} (wall)')
     print(f'  numpy/scipy.sparse baseline (full Newton, spsolve): median real-time factor '

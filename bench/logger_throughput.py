@@ -3,7 +3,7 @@
 A publisher process sends Odometry (reliable, depth 1000) at a fixed rate for a few
 seconds to the recorder process; the MCAP is counted afterwards. The same rates are sent
 to a plain rclpy subscriber that deserialises and counts (the executor's ceiling on this
-machine), measured in the same run. Target (issue 2): >= 5,000 msg/s with zero loss.
+machine), measured in the same run. Target: >= 5,000 msg/s with zero loss.
 
     ./dev bench logger_throughput [--rates 3000 5000 7000 9000] [--seconds 5] [--repeats 3]
 """

@@ -2,7 +2,7 @@
 
 One decision = ``Planner.decide(pose, body_velocity)``: monotone progress of the measured pose,
 nearest-neighbour lookups, eq. 18 predictions of all 9^H sequences, eq. 19 at the leaves.
-Poses walk along the paper's ellipse with noise. Targets (issue 5): median <= 1 ms at depth 1
+Poses walk along the paper's ellipse with noise. Targets: median <= 1 ms at depth 1
 and <= 20 ms at depth 3 over 1,000 decisions.
 
 The same decisions are also made by a straightforward implementation measured in the same run:

@@ -1,4 +1,4 @@
-"""Batched DER rollouts for a planner decision (issue 19) against FrogSimulation.step.
+"""Batched DER rollouts for a planner decision against FrogSimulation.step.
 
 Measured in the same run, medians over ``--repeats`` (the two methods alternate within each
 repeat, so both see the same machine load; CPU time is the process's, all threads):
@@ -217,7 +217,7 @@ def main(argv=None):
             'd1 cpu': len(prims) * period / med(d1_cpu), 'd1 wall': len(prims) * period / med(d1_wall),
             'd2 cpu': n2 * period / med(d2_cpu), 'd2 wall': n2 * period / med(d2_wall)}
     load = os.getloadavg()
-    print(f'planner rollouts (issue 19): {ro.threads} rollout thread(s) on {len(os.sched_getaffinity(0))} CPU(s), '
+    print(f'planner rollouts: {ro.threads} rollout thread(s) on {len(os.sched_getaffinity(0))} CPU(s), '
           f'load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f}; period {period:g} s; '
           f'{args.repeats} repeats x {len(starts)} start states; set-up (model builds, numba cache) {setup:.1f} s')
     print(f'  step plan: {ro.kick_time_step * 1e3:g} ms for {ro.kick_window:g} s after the last firing, then <= '

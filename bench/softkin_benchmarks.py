@@ -1,4 +1,4 @@
-"""softkin_fk benchmarks (issue 6): FK iteration, 240-degree bending, IK trajectories, config space.
+"""softkin_fk benchmarks: FK iteration, 240-degree bending, IK trajectories, config space.
 
 Sections (run all, or name some):
 

@@ -1,4 +1,4 @@
-"""Accuracy table of frog_vision (issue 12): tracking on rendered sequences against the
+"""Accuracy table of frog_vision: tracking on rendered sequences against the
 renderer's exact ground truth at several noise, blur and lighting levels; tank calibration
 against a known camera pose; and the filter against the authors' raw differences on their
 hardware logs.

@@ -1,4 +1,4 @@
-"""Camera-simulator frame rate at 640x480 (issue 12 target: >= 60 frames/s on one core).
+"""Camera-simulator frame rate at 640x480 (target: >= 60 frames/s on one core).
 
 Frames of a swimming-and-turning sequence with the defaults of ``camera_sim`` (5-sample motion
 blur over 10 ms, 2x supersampling of the robot, noise, uneven lighting), and with lens

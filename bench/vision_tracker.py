@@ -1,4 +1,4 @@
-"""Tracker latency per 640x480 frame (issue 12 target: median detection + estimation <= 10 ms
+"""Tracker latency per 640x480 frame (target: median detection + estimation <= 10 ms
 on one core) and tracker_node throughput at 30 fps (no growing backlog).
 
 Frames: a rendered swimming-and-turning sequence (camera_sim defaults, noise 5). Measured on
