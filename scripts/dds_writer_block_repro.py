@@ -4,9 +4,9 @@
 A writer publishes odometry at 200 Hz (as sim_node) and measures every ``publish()``; a reader
 of it that also publishes 640x480 images at 18 Hz (as camera_sim) is SIGKILLed and restarted
 every --period s, with --busy busy processes loading the machine. It prints each second's
-longest publish and counts the seconds in which a publish took longer than --slow. Found after
-a run of the suite under load in which sim_node and bridge_node stayed blocked in ``publish``
-after camera_sim's SIGKILL (docs/faults.md, session 26). Transports are Fast DDS's default
+longest publish and counts the seconds in which a publish took longer than --slow. It checks
+whether sim_node and bridge_node can stay blocked in ``publish`` after camera_sim's SIGKILL,
+as seen once in a run of the suite under load. Transports are Fast DDS's default
 unless --transports is given.
 
 Examples (in ./dev shell)::

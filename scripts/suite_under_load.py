@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Run the test suite N times in a row beside K busy processes (issue 22: the tests hold under load).
+"""Run the test suite N times in a row beside K busy processes: do the tests hold under load?
 
 Each run is the README's test command, ``./dev test`` (pytest arguments after ``--`` are passed
 on). The busy processes spin a CPU core each for the whole series, so the suite's node processes

@@ -79,7 +79,7 @@ def test_sigterm_stops_the_run_and_the_busy_processes(tmp_path, case):
     """``kill`` (SIGTERM) of the driver mid-run: the run under way is stopped (pytest too, under
     ./dev's shell), the busy process does not spin on, and the summary is still written. Also when
     the driver was started with SIGINT ignored (``nohup ... &`` in a script: inherited by every
-    child, so a series' pytest ran on for 5 min after the stop, session 23), and when the run
+    child, so without care a series' pytest runs on after the stop), and when the run
     itself ignores SIGINT (then SIGTERM after the grace)."""
     slow = tmp_path / "test_slow.py"
     head = "import signal\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\n" if case == "a-test-ignoring-SIGINT" else ""
