@@ -1,4 +1,4 @@
-"""A generated walk of bad inputs through every node (issue 23, "Deliver").
+"""A generated walk of bad inputs through every node.
 
 For every subscription, service and action of bridge_node, sim_node, kinematics_node,
 stepper_driver and planner_node, the walk takes a valid input that *would* actuate and

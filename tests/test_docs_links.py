@@ -28,7 +28,7 @@ def _anchors(path: Path) -> set[str]:
 
 def test_anchor_rule():
     assert anchor("Simulator fidelity (`frog_sim`)") == "simulator-fidelity-frog_sim"
-    assert anchor("Hardware replays: the robot's runs (issue 18)") == "hardware-replays-the-robots-runs-issue-18"
+    assert anchor("Planners compared: the twin's runs (depth 1, 2)") == "planners-compared-the-twins-runs-depth-1-2"
 
 
 def test_every_relative_link_resolves():

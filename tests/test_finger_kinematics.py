@@ -163,7 +163,7 @@ def test_bad_requests_are_refused_with_a_reason(finger):
         (fk, ForwardKinematics.Request(actuation=[1.0, 1.0]), "expected 3"),
         (fk, ForwardKinematics.Request(actuation=[0.5, 1.0, 1.0]), "outside its range"),
         (fk, ForwardKinematics.Request(actuation=[1.0, math.inf, 1.0]), "not finite"),
-        # issue 23.2: a NaN tolerance was accepted, a negative one failed inside the solver
+        # a non-finite or negative tolerance is refused before the solver
         (ik, SolveIk.Request(target=Point(x=0.1, y=0.05, z=0.0125), tolerance=math.nan), "tolerance nan"),
         (ik, SolveIk.Request(target=Point(x=0.1, y=0.05, z=0.0125), tolerance=math.inf), "tolerance inf"),
         (ik, SolveIk.Request(target=Point(x=0.1, y=0.05, z=0.0125), tolerance=-1.0), "tolerance -1.0"),
@@ -352,8 +352,8 @@ def test_follow_curve_cancel_and_bad_goals(finger):
 
 
 def test_non_finite_tolerance_and_huge_counts_move_nothing(finger):
-    """issue 23.2: ``tolerance: .nan`` sent three unsolved setpoints and SUCCEEDED; a huge
-    ``n_waypoints`` was a MemoryError. Each is now aborted with the field named, nothing sent."""
+    """A goal with ``tolerance: .nan`` or a huge ``n_waypoints`` is aborted with the field named,
+    and no setpoint is sent."""
     from action_msgs.msg import GoalStatus
     from soft_robot_interfaces.action import FollowCurve
     proc, probe = finger

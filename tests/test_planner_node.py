@@ -44,7 +44,7 @@ def _odom(x, y, yaw, v=0.01):
     m.pose.pose.position.x, m.pose.pose.position.y = x, y
     m.pose.pose.orientation.z, m.pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
     m.twist.twist.linear.x = v
-    now = time.time()              # odometry is stamped (an unstamped one is refused, issue 23.9)
+    now = time.time()              # odometry is stamped (an unstamped one is refused)
     m.header.stamp.sec, m.header.stamp.nanosec = int(now), int((now % 1) * 1e9)
     return m
 

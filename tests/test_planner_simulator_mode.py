@@ -1,4 +1,4 @@
-"""planner_node with transitions:=simulator as real processes (issue 19.1).
+"""planner_node with transitions:=simulator as real processes.
 
 Truth: the predicted pose in the planner's status must be the DER rolled out in this process
 by frog_sim's core (itself tested against FrogSimulation.step) from the same pose and twist,

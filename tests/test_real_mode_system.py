@@ -1,4 +1,4 @@
-"""frog-twin's real mode end to end on emulated devices (issue 20).
+"""frog-twin's real mode end to end on emulated devices.
 
 The "camera" is a real camera_node playing a video the project's renderer made of the robot
 at the line path's start; the "robot" is robot_emulator behind a pty opened as a device

@@ -1,4 +1,4 @@
-"""rollout_node as a real process: the simulator's transitions of a search tree over DDS (issue 19).
+"""rollout_node as a real process: the simulator's transitions of a search tree over DDS.
 
 Truth: the same rollouts run in this process through frog_sim's core (itself tested against
 FrogSimulation.step in frog_sim/test/test_rollouts.py). The wire layout is checked by

@@ -94,7 +94,7 @@ def test_planner_parameters_describe_ranges_and_live_sets_are_validated(launch, 
     assert not d["w_heading"].read_only and d["w_heading"].floating_point_range[0].to_value == 1e6
     assert d["depth"].integer_range[0].from_value == 1 and d["depth"].integer_range[0].to_value == 5
     assert d["period"].read_only and d["period"].floating_point_range[0].from_value == 0.05
-    # library_file is live: setting it loads a new or fixed file (issue 23.10)
+    # library_file is live: setting it loads a new or fixed file
     assert "euclidean" in d["metric"].description and not d["library_file"].read_only
 
     # a live weight changes; the new value is used and logged

@@ -1,4 +1,4 @@
-"""What a ROS user hits from the command line (issue 23): bad messages, blocking faults,
+"""What a ROS user hits from the command line: bad messages, blocking faults,
 colliding device paths, start-up errors and signals, all through the nodes' real interfaces.
 """
 
@@ -56,7 +56,7 @@ def trigger(probe, service, timeout=15.0):
     return probe.call(client, Trigger.Request(), timeout=timeout)
 
 
-# -- image_preview (issue 23.3, 23.6) ---------------------------------------------------------
+# -- image_preview -----------------------------------------------------------------------------
 
 def test_image_preview_refuses_an_empty_image_and_stays_up(launch, probe):
     from sensor_msgs.msg import CompressedImage, Image
@@ -107,7 +107,7 @@ def test_image_preview_delivers_rate_hz_from_a_30fps_camera(launch, probe):
     assert rate == pytest.approx(5.0, rel=0.1), (len(stamps), n_frames, span)
 
 
-# -- robot_emulator faults off the executor (issue 23.4) -------------------------------------
+# -- robot_emulator faults off the executor ----------------------------------------------------
 
 def test_emulator_garbage_without_a_reader_does_not_block_the_node(launch, probe, tmp_path):
     from rcl_interfaces.srv import GetParameters
@@ -126,7 +126,7 @@ def test_emulator_garbage_without_a_reader_does_not_block_the_node(launch, probe
     assert emu.wait(8.0) == 0
 
 
-# -- emulator device paths (issue 23.5) and start-up errors (issue 23.7) ----------------------
+# -- emulator device paths and start-up errors -------------------------------------------------
 
 def _fatal_line(proc):
     lines = [line for line in proc.log_text().splitlines() if "fatal configuration error" in line]
@@ -178,7 +178,7 @@ def test_an_invalid_topic_name_exits_2_with_one_line(launch, exe, param, value):
     assert f"{param}={value!r} is not a valid topic name" in line, line
 
 
-# -- start-up: signals (issue 23.8), parameters and messages (issue 23.11, 23.13) ------------
+# -- start-up: signals, parameters and messages ------------------------------------------------
 
 def test_sigint_is_honoured_while_kinematics_node_starts(launch):
     node = launch("kinematics_node", params={"config_samples": 9})     # 9^3 solves: a long start
@@ -228,7 +228,7 @@ def test_descriptions_and_unbounded_integer_ranges_read_sanely(launch, probe, tm
     assert "between attempts" in retry
 
 
-# -- non-finite and unstamped odometry (issue 23.9) -------------------------------------------
+# -- non-finite and unstamped odometry ---------------------------------------------------------
 
 def _odom(probe, x=0.0, yaw_w=1.0, stamp=True):
     from nav_msgs.msg import Odometry
@@ -308,7 +308,7 @@ def test_robot_emulator_never_streams_nan_quaternions_and_bridge_names_the_bad_n
     assert "number 2 after Q is not a number: 'zz'" in bridge.log_text()
 
 
-# -- planner_node library errors are clear and fixable live (issue 23.10) --------------------
+# -- planner_node library errors are clear and fixable live ------------------------------------
 
 def test_planner_library_error_is_clear_and_fixed_by_setting_library_file(launch, probe, tmp_path, library):
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
@@ -337,7 +337,7 @@ def test_planner_library_error_is_clear_and_fixed_by_setting_library_file(launch
     assert node.running()
 
 
-# -- /diagnostics from every node that can fail (issue 23.12) -------------------------------
+# -- /diagnostics from every node that can fail ------------------------------------------------
 
 def test_diagnostics_from_the_nodes_that_had_none(launch, probe, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
@@ -361,7 +361,7 @@ def test_diagnostics_from_the_nodes_that_had_none(launch, probe, tmp_path):
     assert got["marlin_emulator"] == (0, "waiting for G-code from the host")
 
 
-# -- minor items (issue 23.14) ----------------------------------------------------------------
+# -- smaller items -----------------------------------------------------------------------------
 
 def test_stepper_driver_reports_a_halted_board_until_it_resets(launch, probe, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray

@@ -73,8 +73,8 @@ def test_essential_node_is_not_restarted(tmp_path):
 
 @pytest.mark.system
 def test_a_node_waiting_for_its_restart_at_the_stop_is_not_an_unclean_stop(tmp_path):
-    """Session 31: a recorder killed as deaf 2 s before the goal, its restart due in 4 s, made the run
-    'failed' for an unclean stop; its process had ended before the stop, and the event says why."""
+    """A recorder killed as deaf 2 s before the goal, its restart due in 4 s, does not make the run
+    'failed' for an unclean stop: its process had ended before the stop, and the event says why."""
     sup = Supervisor(RestartPolicy(backoff_s=30.0, backoff_max_s=30.0), log=lambda s: None)
     sup.add("rec", _sleeper(tmp_path, "rec"), lambda label: _sleeper(tmp_path, label))
     sup.add("bad", _sleeper(tmp_path, "bad"), lambda label: _sleeper(tmp_path, label))
