@@ -19,9 +19,9 @@ LIMB_LENGTH = 0.035        # L_i [m]
 LIMB_WIDTH = 0.004         # limb rod diameter [m]
 LIMB_ROOT_ANGLE = np.radians(-75.0)   # root direction from lateral toward aft
 #: Centre of mass relative to the body ring's centre, along the body's x axis [m]. Measured on
-#: frog_sim's recalibrated model (issue 11; its rigid-body centre includes the limbs' added
-#: mass, eq. 10) at the default design over a 1 Hz gait, in the frame of its heading:
-#: 3.36 +- 0.31 mm AHEAD of the ring's centre (the model before issue 11: 0.26 mm behind). It is
+#: frog_sim's calibrated model (its rigid-body centre includes the limbs' added mass, eq. 10)
+#: at the default design over a 1 Hz gait, in the frame of its heading: 3.36 +- 0.31 mm AHEAD
+#: of the ring's centre. It is
 #: also the default tag-to-body offset (the tag is glued on the body's centre).
 COM_AHEAD_OF_RING_CENTRE = 0.00336
 
