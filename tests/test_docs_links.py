@@ -22,8 +22,11 @@ def anchor(heading: str) -> str:
 
 
 def _anchors(path: Path) -> set[str]:
+    """The anchors of a document: its headings', and explicit ``<a id="...">`` ones (which keep
+    a link working when its heading is reworded)."""
     text = re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
-    return {anchor(m.group(1)) for m in re.finditer(r"^#+ (.+)$", text, re.M)}
+    headings = {anchor(m.group(1)) for m in re.finditer(r"^#+ (.+)$", text, re.M)}
+    return headings | set(re.findall(r"<a (?:id|name)=\"([^\"]+)\"", text))
 
 
 def test_anchor_rule():
