@@ -235,6 +235,15 @@ class FrogParameters(Settings):
                                         'quadratic drag',
                                         min=0.0, max=0.05, unit='N m s/rad')
 
+    # --- friction at the waterline (core/waterline_friction.py) ---
+    # f: contact-line friction per unit length of the body's waterline
+    waterline_friction: float = setting(0.0,
+                                        'contact-angle hysteresis at the waterline, per unit length of the body\'s '
+                                        'waterline: a rate-independent force 2 f L_o against the swimming and a torque '
+                                        'f L_o^2 against the turn (core/waterline_friction.py), what stops a turn '
+                                        'within the period',
+                                        min=0.0, max=0.05, unit='N/m')
+
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first value outside its range or choices."""
         reason = check(self)
