@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -47,6 +48,21 @@ def pytest_runtest_makereport(item, call):
     outcome = yield
     rep = outcome.get_result()
     setattr(item, f"rep_{rep.when}", rep)
+
+
+@pytest.fixture
+def one_twin():
+    """Hold the machine's one slot for a whole twin (eight node processes, ~1.5 cores): two twins side
+    by side on 2 cores starve each other's trackers, and decisions then wait on states older than the
+    planner's max_state_age_s. Other tests run beside it; twin tests take turns (a file lock, so
+    across pytest-xdist workers)."""
+    import fcntl
+    with open(Path(tempfile.gettempdir()) / "soft_robot_one_twin.lock", "w") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
 
 
 @pytest.fixture

@@ -403,7 +403,8 @@ def test_walk_stepper_driver(launch, probe, tmp_path):
 def test_walk_planner_node(launch, probe, library, tmp_path):
     from nav_msgs.msg import Odometry
     from soft_robot_interfaces.msg import Primitive
-    planner = launch("planner_node", params={"library_file": str(library), "period": 0.3, "stale_periods": 100.0})
+    planner = launch("planner_node", params={"library_file": str(library), "period": 0.3, "max_state_age_s": 60.0,
+                                              "state_topic": ""})
     chosen = []
     probe.node.create_subscription(Primitive, "/frog/primitive", chosen.append, QOS)
     probe.wait_for_topic("/frog/primitive", timeout=60)

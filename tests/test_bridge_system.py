@@ -175,6 +175,53 @@ def test_each_primitive_becomes_the_firmware_lines_in_order_and_time(launch, pro
     assert emu.stop() == 0 and bridge.stop() == 0
 
 
+def test_nothing_fires_on_a_state_older_than_max_state_age_s_and_sent_records_the_age(launch, probe, tmp_path):
+    """The last hop: a primitive whose state_stamp is 0.6 s old is refused whole (counted, logged, no
+    line on the wire, never fired later); one on a 0.1 s old state fires, and frog/bridge/sent carries
+    that state's stamp and its age at each write, so a recording can be audited."""
+    from soft_robot_interfaces.msg import LimbActivation, Primitive
+    emu, bridge, log = start_pair(launch, probe, tmp_path, emulator_params={"imu_rate_hz": 0.0})
+    diag = Diag(probe)
+    sent = []
+    probe.node.create_subscription(LimbActivation, "/frog/bridge/sent", sent.append, QOS)
+    pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
+    cmd = probe.node.create_publisher(LimbActivation, "/frog/limb_command", QOS)
+    publisher_ready(probe, pub)
+    publisher_ready(probe, cmd)
+    heard_by(probe, "bridge_node")
+
+    def primitive(name, state_age):
+        msg = Primitive(id=NAMES.index(name), name=name)
+        now = probe.node.get_clock().now()
+        msg.header.stamp = now.to_msg()
+        state = now.nanoseconds - round(state_age * 1e9)
+        msg.state_stamp.sec, msg.state_stamp.nanosec = state // 10 ** 9, state % 10 ** 9
+        pub.publish(msg)
+        return state * 1e-9
+
+    t0 = time.time()
+    primitive("B", 0.6)
+    bridge.wait_for_log(r"refused: primitive B: the state is 0\.6\d\d s old \(max_state_age_s 0\.5 s\)", timeout=10)
+    probe.spin_until(lambda: diag.values.get("refused_state_age") == "1", 10, "refused_state_age = 1")
+    old = LimbActivation(limbs=[2])
+    old.state_stamp.sec = int(time.time()) - 3
+    cmd.publish(old)
+    bridge.wait_for_log(r"refused: limb command BL: the state is 3\.\d+ s old", timeout=10)
+    probe.spin_until(lambda: diag.values.get("refused_state_age") == "2", 10, "refused_state_age = 2")
+    state = primitive("D", 0.1)
+    wait_h_lines(log, 2, after=t0, probe=probe)
+    probe.spin_until(lambda: len(sent) >= 2, 10, "D's two pulses on frog/bridge/sent")
+    assert [line for _, line in h_lines(read_after_marker(str(tmp_path / "robot_tty"), log), after=t0)] == \
+        ["h 1", "h 2 3"]
+    for m in sent:
+        written = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+        carried = m.state_stamp.sec + m.state_stamp.nanosec * 1e-9
+        assert carried == pytest.approx(state, abs=1e-6) and m.state_age == pytest.approx(written - state, abs=1e-6)
+        assert 0.1 <= m.state_age < 0.5
+    assert sent[1].state_age - sent[0].state_age == pytest.approx(0.08, abs=0.03)
+    assert emu.stop() == 0 and bridge.stop() == 0
+
+
 @pytest.mark.parametrize("order", ["wxyz", "xyzw"])
 def test_imu_lines_become_imu_messages(launch, probe, tmp_path, order):
     emu, bridge, log = start_pair(launch, probe, tmp_path, bridge_params={"quaternion_order": order},
@@ -205,10 +252,10 @@ def test_imu_lines_become_imu_messages(launch, probe, tmp_path, order):
 
 def test_emergency_latches_until_cleared_and_protection_refuses(launch, probe, tmp_path):
     from soft_robot_interfaces.msg import Primitive
-    # the command age is not what this test is about: under load a primitive once came 0.584 s after its
-    # stamp and was refused for its age, not fired, so the second H found no heated limb (session 31)
+    # the state age is not what this test is about: under load a primitive once came 0.584 s after its
+    # stamp and was refused for its age, not fired, so the second H found no heated limb
     emu, bridge, log = start_pair(launch, probe, tmp_path, emulator_params={"imu_rate_hz": 0.0},
-                                  bridge_params={"max_command_age_s": 5.0})
+                                  bridge_params={"max_state_age_s": 5.0})
     diag = Diag(probe)
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     publisher_ready(probe, pub)
@@ -543,7 +590,8 @@ def test_watchdog_cancels_the_pending_rear_when_the_planner_goes_silent(launch, 
     from rcl_interfaces.srv import SetParameters
     from soft_robot_interfaces.msg import Primitive
     emu, bridge, log = start_pair(launch, probe, tmp_path,
-                                  bridge_params={"pulse_ms": 500, "max_duty_cycle": 0.5, "primitive_timeout_s": 0.2},
+                                  bridge_params={"pulse_ms": 500, "max_duty_cycle": 0.5, "primitive_timeout_s": 0.2,
+                                                 "max_state_age_s": 1.5},     # a 0.5 s front-to-rear delay
                                   emulator_params={"imu_rate_hz": 0.0})
     # a timeout within the front-to-rear delay is kept (that is this test) but named at start
     bridge.wait_for_log(r"WARN.*primitive_timeout_s 0\.2 s is not longer than the front-to-rear delay 0\.5 s",
@@ -567,8 +615,8 @@ def test_watchdog_cancels_the_pending_rear_when_the_planner_goes_silent(launch, 
     probe.spin_until(lambda: diag.values.get("cancelled_watchdog") == "1", 10, "diagnostics: 1 pulse cancelled")
     assert diag.level == 1 and "no primitive for" in diag.message and diag.values["watchdog"] == "tripped"
     assert float(diag.values["primitive_age_s"]) > 0.2
-    # the bridge's clock passes the rear's due time and the stale bound (0.5 + 0.5 s): no rear line
-    probe.spin_until(lambda: diag.stamp > t_b + 1.2, 10, "diagnostics stamped after the rear's time")
+    # the bridge's clock passes the rear's due time and the state bound (1.5 s): no rear line
+    probe.spin_until(lambda: diag.stamp > t_b + 1.7, 10, "diagnostics stamped after the rear's time")
     assert [line for _, line in h_lines(read_log(log), after=t_b)] == ["h 1 0"]
     assert bridge.log_text().count("planner lost?") == 2, "each silence is logged once"
 

@@ -1,9 +1,10 @@
-"""Faults in the running twin (issue 22), the reduced campaign: one run per fault class.
+"""Faults in the running twin, the reduced campaign: one run per fault class, and signals from outside.
 
-Each run is ``frog-twin --path ellipse --faults SPEC``: the nine real node processes on their
-own ROS domain, the faults injected while the frog follows the path. What is checked comes
-from outside the nodes under test: the twin's watch node saw every odometry message, decision
-and firing, and the recording is compared with what it saw.
+Each run is ``frog-twin --faults SPEC`` (the injector) or ``frog-outside-faults`` (plain signals
+from a process outside the twin's tree): the real node processes on their own ROS domain, the
+faults while the frog follows the path. What is checked comes from outside the nodes under
+test: the twin's watch node saw every decision and firing, the recording is compared with what
+it saw, and every pulse is audited against the newest measured pose before it.
 """
 
 import json
@@ -16,10 +17,13 @@ from pathlib import Path
 
 import pytest
 
+from frog_common.state_age import MAX_STATE_AGE_S
 from frog_twin.core.faults import FAULT_CLASSES, parse_faults
-from frog_twin.twin import RESTART_READY_TIMEOUT_S
+from soft_robot_common.liveness import Budgets
 
-pytestmark = pytest.mark.system
+RESTART_GRACE_S = Budgets().restart_grace_s
+
+pytestmark = [pytest.mark.system, pytest.mark.usefixtures("one_twin")]
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -48,7 +52,7 @@ def test_recoverable_faults_complete_the_path_with_nothing_fired_on_stale_state(
     rep = m["faults"]
     # a restarted tracker that never got a camera model, or a restarted recorder that records nothing
     # (the restarted-reader wedge, docs/faults.md), is killed and restarted again by the supervisor:
-    # one more restart and up to RESTART_READY_TIMEOUT_S more to recover
+    # one more restart and up to RESTART_GRACE_S more to recover
     hung = [e["node"] for e in m["supervision"]["events"] if e["what"] == "hung"]
     assert set(hung) <= {"tracker_node", "recorder"}, m["supervision"]["events"]
     if hung:
@@ -60,23 +64,23 @@ def test_recoverable_faults_complete_the_path_with_nothing_fired_on_stale_state(
         assert any(w.startswith(f.label() + ":") for w in done), (f.label(), done)
     assert not rep["injector_failures"], rep["injector_failures"]
     why = {"goal": m["goal_reached"], "progress": m["final_progress"], "stop_reason": rep["stop_reason"],
-           "stale": rep["stale_firings"][:3], "recorder": rep["recorder"], "unclean": m["unclean_stops"],
+           "stale": rep["stale_pulses"][:3], "recorder": rep["recorder"], "unclean": m["unclean_stops"],
            "stops": m["supervision"]["stops"]}
     assert rep["outcome"] == "completed", (why, stdout[-3000:])
-    assert rep["stale_firings"] == [], rep["stale_firings"][:5]
-    assert rep["n_firings"] >= 10
+    assert rep["stale_pulses"] == [], rep["stale_pulses"][:5]
+    assert rep["n_firings"] >= 10 and rep["pulse_ages"]["pulses"] >= 10
     assert rep["recorder_lost"] == 0, rep["recorder"]
     # a hung tracker holds every recovery until it is back (no odometry, no following): the faults
-    # that ended before its bound get the same extra time (under load, session 23: the planner killed
-    # at 9 s recovered at 27 s, with the tracker killed at 3 s, hung, and back at 27 s)
-    extra = (RESTART_READY_TIMEOUT_S + 5) * hung.count("tracker_node")
-    # (a SIGSTOPped tracker can wake deaf, docs/faults.md: found after --deaf-tracker-after and restarted)
+    # that ended before its bound get the same extra time (seen under load: the planner killed at 9 s
+    # recovered at 27 s, with the tracker killed at 3 s, hung, and back at 27 s)
+    extra = (RESTART_GRACE_S + 5) * hung.count("tracker_node")
+    # (a SIGSTOPped tracker can wake deaf, docs/faults.md: found after deaf_after_s and restarted)
     tracker_back = max((pf["end_s"] + 15 + extra for pf in rep["per_fault"]
                         if pf["fault"].startswith(("kill:tracker", "sigstop:tracker"))), default=-math.inf)
 
     def own(pf):
         return 15 + extra * (pf["end_s"] < tracker_back)
-    # a fault not yet recovered from when the next one starts recovers with it (session 30: the tracker
+    # a fault not yet recovered from when the next one starts recovers with it (seen: the tracker
     # killed at 3 s was back, but the planner killed at 9 s followed again only at 18.8 s)
     starts = [f.at for f in faults]
     limits = [p["end_s"] + own(p) for p in rep["per_fault"]]
@@ -105,53 +109,59 @@ def test_emergency_stops_the_run_cleanly_and_nothing_fires_after_it(small_librar
     # the robot fired nothing from 0.5 s after the EMERGENCY line (its BLE latency) to the end
     assert rep["last_firing_s"] is None or rep["last_firing_s"] < t_emergency + 0.5, (rep["last_firing_s"],
                                                                                      t_emergency)
-    assert rep["stale_firings"] == [] and rep["recorder_lost"] == 0
+    assert rep["stale_pulses"] == [] and rep["recorder_lost"] == 0
     assert m["unclean_stops"] == []
 
 
 def test_a_dead_tracker_stops_the_run_cleanly_after_the_stuck_timeout(small_library, tmp_path):
-    m, stdout, _ = _run(small_library, tmp_path, FAULT_CLASSES["dead_node"], "--stuck-timeout", "8")
+    m, stdout, _ = _run(small_library, tmp_path, FAULT_CLASSES["dead_node"], "--budget", "stuck_after_s=10")
     rep = m["faults"]
-    why = {"stop_reason": rep["stop_reason"], "stale": rep["stale_firings"][:3], "lost": rep["recorder_lost"],
+    why = {"stop_reason": rep["stop_reason"], "stale": rep["stale_pulses"][:3], "lost": rep["recorder_lost"],
            "unclean": m["unclean_stops"], "stops": m["supervision"]["stops"]}
     assert rep["outcome"] == "stopped", (why, stdout[-3000:])
-    assert "has not followed for 8 s" in rep["stop_reason"] and "stale" in rep["stop_reason"], rep["stop_reason"]
-    assert rep["stale_firings"] == [] and rep["recorder_lost"] == 0
+    assert re.fullmatch(r"the planner has not followed \(status waiting\) for 1\d\.\d s", rep["stop_reason"]), \
+        rep["stop_reason"]
+    assert [v["rule"] for v in m["liveness_verdicts"]] == ["stuck"], m["liveness_verdicts"]
+    assert rep["stale_pulses"] == [] and rep["recorder_lost"] == 0
     assert m["supervision"]["restarts"]["tracker_node"] == 0
     assert m["unclean_stops"] == []
 
 
-def test_the_stale_state_check_catches_a_planner_deciding_on_a_frozen_camera(small_library, tmp_path):
-    """The negative control: with the frozen-camera verdict and the planner's stale bound both
-    switched off, the frog is kicked on an 8 s old picture (the tracker poses no copy of a frame,
-    so the planner decides on the last pose before the freeze), and the campaign's check says so."""
+def test_the_audit_catches_pulses_on_a_frozen_camera_when_both_hops_are_switched_off(small_library, tmp_path):
+    """The negative control: with the frozen-camera verdict and the state-age bound of the planner and
+    the bridge all switched off, the frog is kicked on the last pose before an 8 s freeze (the tracker
+    poses no copy of a frame), and the recording's audit says so."""
     m, stdout, _ = _run(small_library, tmp_path, "camera_freeze@3+8",
                         "--node-param", "tracker_node:frozen_frames=1000",
-                        "--node-param", "planner_node:stale_periods=100.0")
+                        "--node-param", "planner_node:max_state_age_s=60.0",
+                        "--node-param", "bridge_node:max_state_age_s=60.0")
     rep = m["faults"]
     assert rep["outcome"] == "failed", rep["outcome"]
-    stale = rep["stale_firings"]
-    assert len(stale) >= 2, stale
-    assert all(s["pose_age"] > rep["pose_bound_s"] for s in stale)
-    assert "limb firings on state older than the bound: 0" not in stdout
+    frozen = [s for s in rep["stale_pulses"] if s["published"] > 2.0]     # kicks well into the 8 s freeze
+    assert len(frozen) >= 2, rep["stale_pulses"]
+    assert all(s["claimed"] > 2.0 for s in frozen)             # the bridge's own record agrees
+    assert rep["state_bound_s"] == MAX_STATE_AGE_S           # the design's bound, not the sabotaged run's
+    assert "pulses on a state older than 0.5 s: 0 of" not in stdout
 
 
 def test_a_restarted_tracker_that_never_gets_a_camera_is_taken_for_hung(small_library, tmp_path):
     """The camera killed for good, then the tracker: each restarted tracker waits for a camera_info
-    that never comes, which is what a hung one looks like (docs/faults.md). The supervisor kills
-    each after RESTART_READY_TIMEOUT_S; out of restarts, the run stops cleanly, naming it."""
+    that never comes, which is what a hung one looks like (docs/faults.md): its diagnostics never say
+    ready. The supervisor kills each after RESTART_GRACE_S; out of restarts, the run stops cleanly,
+    naming it."""
     m, stdout, _ = _run(small_library, tmp_path, "kill:camera_sim@2,restart=no;kill:tracker_node@3",
-                        "--stuck-timeout", "200")
+                        "--budget", "stuck_after_s=200")
     rep = m["faults"]
     events = m["supervision"]["events"]
     hung = [e for e in events if e["what"] == "hung"]
     assert [e["node"] for e in hung] == ["tracker_node"] * 3, events
     restarted = [e["time"] for e in events if e["what"] == "restarted" and e["node"] == "tracker_node"]
     # the 'restarted' event is logged just after the process starts, where the timeout counts from
-    assert all(h["time"] - r >= RESTART_READY_TIMEOUT_S - 0.5 for h, r in zip(hung, restarted)), (hung, restarted)
+    assert all(h["time"] - r >= RESTART_GRACE_S - 0.5 for h, r in zip(hung, restarted)), (hung, restarted)
     assert rep["outcome"] == "stopped", (rep["stop_reason"], m["unclean_stops"], stdout[-3000:])
     assert rep["stop_reason"].startswith("tracker_node exited (SIGKILL; 3 restart(s) used)"), rep["stop_reason"]
-    assert rep["stale_firings"] == [] and rep["recorder_lost"] == 0
+    assert all(h["detail"].startswith(f"not ready within {RESTART_GRACE_S:g} s") for h in hung), hung
+    assert rep["stale_pulses"] == [] and rep["recorder_lost"] == 0
     assert m["unclean_stops"] == []
 
 
@@ -275,20 +285,21 @@ def _twin_with_node_stopped(small_library, tmp_path, node: str, *extra):
 def test_a_deaf_tracker_is_killed_and_restarted_and_the_frog_completes_the_path(small_library, tmp_path):
     """A tracker alive but receiving nothing (the DDS wedge of docs/faults.md; here SIGSTOPped from
     outside the injector, so nothing excuses its silence): the twin sees camera_sim's published
-    frames rise in /diagnostics and the tracker's not, kills it after --deaf-tracker-after, the
-    supervisor restarts it, and the frog completes the path."""
-    m, t_stop, log = _twin_with_node_stopped(small_library, tmp_path, "tracker_node", "--deaf-tracker-after", "6")
+    frames rise in /diagnostics and the tracker's not (the camera edge of the graph file's liveness
+    section), kills it after deaf_after_s, the supervisor restarts it, and the frog completes the path."""
+    m, t_stop, log = _twin_with_node_stopped(small_library, tmp_path, "tracker_node", "--budget", "deaf_after_s=6")
     events = m["supervision"]["events"]
     hung = [e for e in events if e["what"] == "hung"]
     assert hung and hung[0]["node"] == "tracker_node" and hung[0]["detail"].startswith(
-        "deaf: no camera frame received for"), events
+        "tracker_node received nothing on camera/image_raw for"), events
+    assert m["liveness_verdicts"][0]["rule"] == "camera", m["liveness_verdicts"]
     # silent since its last diagnostics (1 Hz, up to 1 s before the stop): not before the bound, and soon after
     assert 6.0 - 1.5 <= hung[0]["time"] - t_stop < 6.0 + 5.0, (hung[0]["time"] - t_stop, events)
     assert m["supervision"]["restarts"]["tracker_node"] == len(hung), events
     assert m["unclean_stops"] == [], m["supervision"]["stops"]
     later = [e["detail"] for e in hung[1:]]
     if later:     # a restarted tracker that got no camera_info: the restarted-subscriber wedge (docs/faults.md)
-        assert all(d.startswith("no 'camera model from camera_info'") for d in later), later
+        assert all(d.startswith("not ready within") for d in later), later
         warnings.warn(f"{len(later)} restarted tracker(s) hung and were restarted again (docs/faults.md)")
     if not m["goal_reached"]:     # only when every restart after the deaf kill met that wedge
         assert len(later) == 2 and m["stop_reason"].startswith("tracker_node exited (SIGKILL; 3 restart(s) used)"), \
@@ -296,19 +307,19 @@ def test_a_deaf_tracker_is_killed_and_restarted_and_the_frog_completes_the_path(
 
 
 def test_a_deaf_recorder_is_killed_and_restarted_into_a_new_file(small_library, tmp_path):
-    """A recorder alive but recording nothing (the restarted-reader wedge met by a restarted recorder in
-    session 29's series; here SIGSTOPped from outside the injector, so nothing excuses it): the twin sees
-    the planner's messages published and the recorder's counts in /diagnostics not rising, kills it
-    after --deaf-recorder-after, the supervisor restarts it into the next file, and the recording of
-    the run is complete outside the deaf time (a late fault gives the run its fault report)."""
+    """A recorder alive but recording nothing (the restarted-reader wedge, seen in a restarted recorder;
+    here SIGSTOPped from outside the injector, so nothing excuses it): the twin sees the planner's
+    messages published and the recorder's counts in /diagnostics not rising, kills it after
+    deaf_after_s, the supervisor restarts it into the next file, and the recording of the run is
+    complete outside the deaf time (a late fault gives the run its fault report)."""
     out = tmp_path / "twin"
-    m, t_stop, _ = _twin_with_node_stopped(small_library, tmp_path, "recorder", "--deaf-recorder-after", "6",
+    m, t_stop, _ = _twin_with_node_stopped(small_library, tmp_path, "recorder", "--budget", "deaf_after_s=6",
                                            "--faults", "ble_loss@30+1")
     events = m["supervision"]["events"]
     hung = [e for e in events if e["what"] == "hung" and e["node"] == "recorder"]
-    # a restarted one is killed again if it is deaf too, or never subscribes (its ready pattern)
-    deaf_kills = [e for e in hung if e["detail"].startswith("deaf: nothing recorded on /frog/")]
-    assert hung and hung[0] in deaf_kills and all(e in deaf_kills or e["detail"].startswith("no ")
+    # a restarted one is killed again if it is deaf too, or never subscribes (its ready keys)
+    deaf_kills = [e for e in hung if e["detail"].startswith("recorder received nothing on frog/")]
+    assert hung and hung[0] in deaf_kills and all(e in deaf_kills or e["detail"].startswith("not ready")
                                                   for e in hung), events
     # silent since the last diagnostics (1 Hz) whose count on the topic had risen: the topic's last
     # message recorded before the stop may be a planner period (1.43 s) old and the diagnostics
@@ -331,9 +342,9 @@ def test_a_deaf_recorder_is_killed_and_restarted_into_a_new_file(small_library, 
     deaf = rep["recorder_deaf"]
     assert len(deaf) == len(deaf_kills) and all(topic.startswith("/frog/") and 0.0 < t0 < t1 for t0, t1, topic in deaf)
     assert deaf[0][1] - deaf[0][0] >= 4.5 and rep["recorder_deaf_missed"] >= 3, (deaf, rep["recorder_deaf_missed"])
-    # a restarted one killed before it got ready (a CI series: wedged, subscribed to /frog/bridge/sent only)
+    # a restarted one killed before it got ready (seen: wedged, subscribed to /frog/bridge/sent only)
     # was never up: its time is said, not checked
-    unready_kills = [e for e in hung if e["detail"].startswith("no ")]
+    unready_kills = [e for e in hung if e["detail"].startswith("not ready")]
     assert len(rep["recorder_unready"]) >= len(unready_kills), (rep["recorder_unready"], events)
     # the stopped recorder's file (recovered) and each restarted one's: the last holds the run's end
     names = sorted(f.name for f in (out / "ellipse" / "recording").glob("*.mcap"))
@@ -350,14 +361,14 @@ def test_a_deaf_recorder_is_killed_and_restarted_into_a_new_file(small_library, 
 def test_a_stalled_world_stops_the_run_with_that_reason(small_library, tmp_path):
     """A simulator that stops stepping without a fault pausing it (seen once: sim_node blocked for good
     in the middleware's publish, docs/faults.md; here SIGSTOPped from outside the injector): /clock stops
-    for every node, and the twin stops the run after --world-stall-after with that reason, instead of
-    taking the vision nodes that starve of /clock for hung. SIGCONT once the twin says it stops, so
-    every node can end cleanly."""
+    for every node, and the twin stops the run after world_stall_s (the clock edge) with that reason,
+    instead of taking the vision nodes that starve of /clock for hung. SIGCONT once the twin says it
+    stops, so every node can end cleanly."""
     import os
     import signal
     import time
     out, log = tmp_path / "twin", tmp_path / "twin.log"
-    p = _start_twin_under_way(small_library, out, log, "--world-stall-after", "4")
+    p = _start_twin_under_way(small_library, out, log, "--budget", "world_stall_s=4")
     sim = None
     try:
         sim = _node_pids(p, log, "sim_node")
@@ -380,9 +391,33 @@ def test_a_stalled_world_stops_the_run_with_that_reason(small_library, tmp_path)
                 pass
     (m,) = json.loads((out / "metrics.json").read_text())
     assert not m["goal_reached"]
-    assert m["stop_reason"].startswith("the simulated world stalled: /clock has not advanced for"), m["stop_reason"]
+    assert m["stop_reason"].startswith("sim_node published nothing on /clock (simulated time) for"), m["stop_reason"]
     # /clock's last message came up to one of sim_node's steps before the SIGSTOP: not before the bound
     assert 4.0 - 0.5 <= t_said - t_stop < 4.0 + 5.0, (t_said - t_stop, log.read_text()[-2000:])
     events = m["supervision"]["events"]
     assert not [e for e in events if e["what"] in ("hung", "exited", "restarted")], events    # no restart spent
     assert m["unclean_stops"] == [], m["supervision"]["stops"]
+
+
+@pytest.mark.parametrize("path, plan", [
+    ("line", "kill:tracker_node@2;sigstop:camera_sim@7+5;sigstop:sim_node@13+3"),
+    ("sine", "sigstop:tracker_node@2+5;kill:camera_sim@8;kill:planner_node@13;sigstop:planner_node@18+5"),
+])
+def test_signals_from_outside_the_twin_never_fire_a_limb_on_a_stale_state(path, plan, small_library, tmp_path):
+    """SIGKILL and SIGSTOP (5 s) of the tracker, the camera and the planner, and SIGSTOP (3 s) of the
+    simulator, sent by frog-outside-faults (a process outside the twin's tree: nothing in the twin
+    excuses them). Every run completes or stops with a reason, and no pulse rests on a state older
+    than max_state_age_s: neither by the recording's publish or receive times nor by the bridge."""
+    from frog_twin.outside_faults import parse_plan, run_with_signals
+    rec = run_with_signals(path, parse_plan(plan), tmp_path / "run", small_library, seed=3,
+                           extra=("--duration", "90"))
+    why = json.dumps({k: rec.get(k) for k in ("outcome", "stop_reason", "sent", "stale_pulses", "restarts",
+                                              "verdicts")}, default=str)[:3000]
+    assert rec["exit"] == 0 and rec["outcome"] in ("completed", "stopped"), why
+    assert [s["signal"] for s in rec["sent"] if s["pid"]] == [f.label() for f in parse_plan(plan)], why
+    ages = rec["pulse_ages"]
+    assert ages["pulses"] >= 5 and rec["stale_pulses"] == [], why
+    assert ages["published"]["max"] <= MAX_STATE_AGE_S
+    assert ages["claimed"]["max"] <= MAX_STATE_AGE_S, why
+    if rec["outcome"] == "stopped":
+        assert rec["stop_reason"], why

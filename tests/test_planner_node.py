@@ -52,7 +52,8 @@ def _odom(x, y, yaw, v=0.01):
 def test_decides_every_period_and_reports_idle_reasons(launch, probe, library):
     from soft_robot_interfaces.msg import PlannerStatus, Primitive
     node = launch("planner_node", params={"library_file": str(library), "period": 0.5,
-                                          "path_type": "line", "odom_topic": "/test/odom"})
+                                          "path_type": "line", "odom_topic": "/test/odom",
+                                          "state_topic": ""})
     prims, status, paths = [], [], []
     probe.node.create_subscription(Primitive, "/frog/primitive", prims.append, QOS)
     probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
@@ -87,15 +88,19 @@ def test_decides_every_period_and_reports_idle_reasons(launch, probe, library):
     assert s.primitive_name == "ABCDEFGHI"[s.primitive_id] and s.total_cost > 0
     assert _same_tick(probe, prims, s).id == s.primitive_id
 
+    # the decision carries the stamp of the state it was decided on: the odometry's (no tracker state)
+    p = _same_tick(probe, prims, s)
+    assert p.state_stamp.sec > 0 and 0.0 <= _stamp(p) - (p.state_stamp.sec + p.state_stamp.nanosec * 1e-9) <= 0.5
+
     # non-finite odometry is rejected, the node keeps running
     odom_pub.publish(_odom(float("nan"), 0.0, 0.0))
-    node.wait_for_log("ignored odometry with non-finite values", timeout=5)
+    node.wait_for_log("ignored odometry: .*not finite", timeout=5)
     assert node.running()
 
-    # stale odometry (none for > 2 periods on the node's clock): back to I with the reason
-    node.wait_for_log(r"odometry is stale \(.* s old\); publishing primitive I", timeout=30)
-    probe.spin_until(lambda: any("stale" in s.message for s in status), 10, "a status saying stale")
-    s = next(s for s in status if "stale" in s.message)
+    # no odometry for longer than max_state_age_s (0.5 s): back to I with the reason
+    node.wait_for_log(r"the state is .* s old \(max_state_age_s 0.5 s\); publishing primitive I", timeout=30)
+    probe.spin_until(lambda: any("s old" in s.message for s in status), 10, "a status saying the state is old")
+    s = next(s for s in status if "s old" in s.message)
     assert s.state == PlannerStatus.STATE_WAITING
     assert _same_tick(probe, prims, s).id == Primitive.ID_I
 
@@ -137,7 +142,9 @@ def test_missing_or_corrupt_library_keeps_node_up_publishing_I(launch, probe, tm
     ({"period": -1.0}, "period"), ({"path_type": "waypoints"}, "waypoint_file"),
     ({"velocity_lookahead": -1.0}, "velocity_lookahead"),
     ({"goal_lateral_tolerance": -0.01}, "goal_lateral_tolerance"), ({"stall_speed": -0.1}, "stall_speed"),
-    ({"replan_interval": 0.5, "transitions": "simulator"}, "replan_interval")])
+    ({"replan_interval": 0.5, "transitions": "simulator"}, "replan_interval"),
+    ({"replan_interval": 0.6}, "not below max_state_age_s"),
+    ({"transitions": "simulator", "reanchor": False}, "reanchor false"), ({"max_state_age_s": 0.0}, "max_state_age_s")])
 def test_bad_parameters_exit_with_a_message(launch, params, message):
     node = launch("planner_node", params=params)
     assert node.wait(60) == 2
@@ -149,7 +156,8 @@ def test_frog_stop_stops_deciding_at_once(launch, probe, library):
     from soft_robot_interfaces.msg import PlannerStatus, Primitive
     from std_msgs.msg import Empty
     node = launch("planner_node", params={"library_file": str(library), "period": 0.5,
-                                          "path_type": "line", "odom_topic": "/test/odom"})
+                                          "path_type": "line", "odom_topic": "/test/odom",
+                                          "state_topic": ""})
     prims, status = [], []
     probe.node.create_subscription(Primitive, "/frog/primitive", prims.append, QOS)
     probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
@@ -190,8 +198,9 @@ def test_odometry_with_an_old_stamp_blocks_decisions_and_is_counted(launch, prob
     the status and a count in the diagnostics; fresh stamps decide again, with the pose's age in the status."""
     from diagnostic_msgs.msg import DiagnosticArray
     from soft_robot_interfaces.msg import PlannerStatus, Primitive
-    node = launch("planner_node", params={"library_file": str(library), "period": 0.5, "stale_periods": 2.0,
-                                          "path_type": "line", "odom_topic": "/test/odom"})
+    node = launch("planner_node", params={"library_file": str(library), "period": 0.5, "max_state_age_s": 1.0,
+                                          "path_type": "line", "odom_topic": "/test/odom",
+                                          "state_topic": ""})
     prims, status, diags = [], [], []
     probe.node.create_subscription(Primitive, "/frog/primitive", prims.append, QOS)
     probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
@@ -211,25 +220,25 @@ def test_odometry_with_an_old_stamp_blocks_decisions_and_is_counted(launch, prob
 
     def stale_values():
         return [int(kv.value) for d in diags for s in d.status if s.name == "planner_node: planner"
-                for kv in s.values if kv.key == "stale_decisions"]
+                for kv in s.values if kv.key == "waited_decisions"]
 
-    # before any odometry: waiting, pose_age NaN, and the refusals are counted already
+    # before any odometry: waiting, state_age NaN, and the refusals are counted already
     probe.spin_until(lambda: status and stale_values() and stale_values()[-1] >= 1, 10, "a counted refusal")
-    assert status[-1].state == PlannerStatus.STATE_WAITING and math.isnan(status[-1].pose_age)
+    assert status[-1].state == PlannerStatus.STATE_WAITING and math.isnan(status[-1].state_age)
 
-    # stamped 3 s ago (bound 2 x 0.5 s = 1 s), delivered now: refused, the age in the message and field
+    # stamped 3 s ago (bound 1 s), delivered now: refused, the age in the message and field
     feed_until(lambda: _stamped_odom(0.05, 0.03, 0.0, 3.0),
-               lambda: any("its stamp is" in s.message for s in status), 10, "a stale-stamp status")
+               lambda: any("the state is" in s.message for s in status), 10, "an old-state status")
     prims.clear()
     status.clear()
     n_before = stale_values()[-1]
     feed_until(lambda: _stamped_odom(0.05, 0.03, 0.0, 3.0), lambda: len(status) >= 3, 10, "3 statuses")
-    assert all(s.state == PlannerStatus.STATE_WAITING and "its stamp is" in s.message for s in status), \
+    assert all(s.state == PlannerStatus.STATE_WAITING and "the state is" in s.message for s in status), \
         [s.message for s in status]
-    assert all(2.9 < s.pose_age < 4.0 for s in status), [s.pose_age for s in status]
+    assert all(2.9 < s.state_age < 4.0 for s in status), [s.state_age for s in status]
     assert prims and all(p.id == Primitive.ID_I for p in prims)
-    node.wait_for_log(r"odometry is stale: its stamp is 3\.\d+ s old .*; publishing primitive I", timeout=5)
-    assert node.log_text().count("its stamp is") == 1, "the reason is logged once, not every period"
+    node.wait_for_log(r"the state is 3\.\d+ s old \(max_state_age_s 1 s\); publishing primitive I", timeout=5)
+    assert node.log_text().count("the state is 3.") == 1, "the reason is logged once, not every period"
     probe.spin_until(lambda: stale_values()[-1] >= n_before + 3, 10, "the diagnostics' count to grow")
 
     # a stamp far in the future (another clock): refused too
@@ -240,7 +249,7 @@ def test_odometry_with_an_old_stamp_blocks_decisions_and_is_counted(launch, prob
     feed_until(lambda: _stamped_odom(0.05, 0.03, 0.0, 0.0),
                lambda: any(s.state == PlannerStatus.STATE_FOLLOWING for s in status), 10, "a decision")
     decided = [s for s in status if s.state == PlannerStatus.STATE_FOLLOWING]
-    assert all(0.0 <= s.pose_age < 1.0 for s in decided), [s.pose_age for s in decided]
+    assert all(0.0 <= s.state_age < 1.0 for s in decided), [s.state_age for s in decided]
     assert node.stop() == 0
 
 
@@ -255,7 +264,7 @@ def test_status_says_where_the_path_is_tighter_than_the_frog_can_turn(launch, pr
     length = 0.07
     node = launch("planner_node", params={"library_file": str(library), "period": 0.5, "path_type": "sine",
                                           "path_length": length, "feasibility_lookahead": 0.1,
-                                          "odom_topic": "/test/odom"})
+                                          "odom_topic": "/test/odom", "state_topic": ""})
     status = []
     probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
     odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
@@ -295,7 +304,8 @@ def test_replan_interval_decides_on_the_mean_pose_and_publishes_the_newest_at_th
     decisions made on its mean (3 cm), published at the period ticks."""
     from soft_robot_interfaces.msg import PlannerStatus, Primitive
     node = launch("planner_node", params={"library_file": str(library), "period": 0.6, "replan_interval": 0.2,
-                                          "path_type": "line", "odom_topic": "/test/odom"})
+                                          "path_type": "line", "odom_topic": "/test/odom",
+                                          "state_topic": ""})
     prims, status = [], []
     probe.node.create_subscription(Primitive, "/frog/primitive", prims.append, QOS)
     probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
@@ -312,7 +322,7 @@ def test_replan_interval_decides_on_the_mean_pose_and_publishes_the_newest_at_th
     decided = queued()
     averaged = 0
     for s in decided:
-        n = int(re.search(r"queued decision on the mean of (\d+) poses", s.message).group(1))
+        n = int(re.search(r"queued decision on the mean of (\d+) states", s.message).group(1))
         # the mean of n alternating poses: 3 cm, or 3 -+ 1/n cm for odd n; the newest is 2 or 4 cm
         assert s.distance_to_path == pytest.approx(0.03, abs=0.01 / n + 2e-4), (n, s.distance_to_path)
         averaged += n >= 2
@@ -327,7 +337,9 @@ def test_replan_slower_than_the_period_sends_each_decision_once(launch, probe, l
     """A queued decision is executed at one tick only: a tick with no new one publishes I."""
     from soft_robot_interfaces.msg import PlannerStatus
     node = launch("planner_node", params={"library_file": str(library), "period": 0.3, "replan_interval": 0.9,
-                                          "path_type": "line", "odom_topic": "/test/odom"})
+                                          "max_state_age_s": 1.5,
+                                          "path_type": "line", "odom_topic": "/test/odom",
+                                          "state_topic": ""})
     status = []
     probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
     odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
@@ -345,4 +357,47 @@ def test_replan_slower_than_the_period_sends_each_decision_once(launch, probe, l
         if a.state == following:                       # the tick after a decision has nothing new
             assert b.state == PlannerStatus.STATE_WAITING and "no new decision" in b.message, b.message
             break
+    assert node.stop() == 0 and node.stopped_cleanly
+
+
+def test_a_predicted_pose_is_decided_on_by_the_age_of_its_measurement(launch, probe, library):
+    """With the tracker's state (frog/tracker/state, the default), odometry stamped now whose
+    measurement is 0.8 s old (a pose the tracker predicted) blocks decisions; a measured pose is
+    decided on, and the primitive carries its measurement's stamp."""
+    from soft_robot_interfaces.msg import PlannerStatus, Primitive, TrackerState
+    node = launch("planner_node", params={"library_file": str(library), "period": 0.3, "path_type": "line",
+                                          "odom_topic": "/test/odom"})
+    prims, status = [], []
+    probe.node.create_subscription(Primitive, "/frog/primitive", prims.append, QOS)
+    probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
+    odom_pub = probe.node.create_publisher(Odometry, "/test/odom", QOS)
+    state_pub = probe.node.create_publisher(TrackerState, "/frog/tracker/state", QOS)
+    node.wait_for_log("following a line path", timeout=60)
+    probe.wait_matched(odom_pub)
+    probe.wait_matched(state_pub)
+
+    def feed(measured_age):
+        def fed():
+            odom = _odom(0.05, 0.03, 0.0)
+            st = TrackerState(state=TrackerState.STATE_COASTING if measured_age else TrackerState.STATE_TRACKING)
+            st.header.stamp = odom.header.stamp
+            t = _stamp(odom) - measured_age
+            st.state_stamp.sec, st.state_stamp.nanosec = int(t), int(round((t % 1) * 1e9)) % 1_000_000_000
+            state_pub.publish(st)
+            odom_pub.publish(odom)
+            return fed.result()
+        return fed
+
+    feed.__defaults__ = None
+    coasting = feed(0.8)
+    coasting.result = lambda: len([s for s in status if "the state is 0.8" in s.message]) >= 3
+    probe.spin_until(coasting, 20, "three statuses refusing a predicted pose")
+    assert not [s for s in status if s.state == PlannerStatus.STATE_FOLLOWING]
+    assert all(p.id == Primitive.ID_I for p in prims)
+    measured = feed(0.0)
+    measured.result = lambda: any(s.state == PlannerStatus.STATE_FOLLOWING for s in status)
+    probe.spin_until(measured, 20, "a decision on a measured pose")
+    s = next(s for s in status if s.state == PlannerStatus.STATE_FOLLOWING)
+    p = _same_tick(probe, prims, s)
+    assert p.id != Primitive.ID_I and 0.0 <= s.state_age < 0.5
     assert node.stop() == 0 and node.stopped_cleanly

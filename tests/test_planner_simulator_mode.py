@@ -56,7 +56,7 @@ def _setup(launch, probe, library, **params):
     from soft_robot_interfaces.msg import PlannerStatus
     node = launch("planner_node", params={"library_file": str(library), "period": PERIOD, "path_type": "line",
                                           "odom_topic": "/test/odom", "transitions": "simulator",
-                                          "decision_deadline": DEADLINE, "stale_periods": 3.0, **params})
+                                          "decision_deadline": DEADLINE, "state_topic": "", **params})
     status, diags = [], []
     probe.node.create_subscription(PlannerStatus, "/frog/planner/status", status.append, QOS)
     probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, QOS)
@@ -101,7 +101,9 @@ def test_decisions_are_the_simulators_rollouts_from_the_coasted_state(launch, pr
     server = launch("rollout_node", params={"threads": 1, "yaw_torque_sd": 0.0})
     server.wait_for_log("ready in", timeout=240)
     # depth 1: the test rolls out one period itself (the node's default is depth 2)
-    node, status, diags, feed_until = _setup(launch, probe, library, depth=1, reanchor=reanchor)
+    # without reanchoring the decision rests on the tick's state, DEADLINE periods old by then
+    bound = {} if reanchor else {"max_state_age_s": DEADLINE * PERIOD + 0.5}
+    node, status, diags, feed_until = _setup(launch, probe, library, depth=1, reanchor=reanchor, **bound)
     feed_until(lambda: sum("simulator, depth 1" in s.message for s in status) >= 2, 60, "two simulator decisions")
     decided = [s for s in status if "simulator, depth 1" in s.message]
     with Rollouts(threads=1) as core:

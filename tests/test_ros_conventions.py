@@ -43,7 +43,7 @@ def test_two_frogs_in_two_namespaces_do_not_cross_talk(launch, probe, library):
         nodes.append(launch("sim_node", params={"initial_y": y, "odom_alias_topic": "frog/odom"},
                             remap={"__ns": ns}, name=f"sim{ns[-1]}"))
         nodes.append(launch("planner_node", params={"library_file": str(library), "period": 0.5,
-                                                    "path_type": "line"},
+                                                    "path_type": "line", "state_topic": ""},
                             remap={"__ns": ns}, name=f"planner{ns[-1]}"))
     from soft_robot_interfaces.msg import PlannerStatus
     status = {ns: [] for ns in offsets}

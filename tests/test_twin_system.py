@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.system
+pytestmark = [pytest.mark.system, pytest.mark.usefixtures("one_twin")]
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -74,6 +74,27 @@ def test_twin_closes_the_real_chain(small_library, tmp_path):
         with open(f, "rb") as fh:
             recorded |= {c.topic for c in make_reader(fh).get_summary().channels.values()}
     assert _layout_topics() <= recorded, _layout_topics() - recorded
+    # every node reports through the one helper: its pid and whether it works, as typed keys
+    keys = _diagnostics_keys(m["recording"])
+    nodes = {"sim_node", "camera_sim", "tracker_node", "image_preview", "robot_emulator", "bridge_node",
+             "planner_node", "recorder"}
+    assert nodes <= set(keys), set(keys)
+    assert all({"pid", "ready"} <= keys[n] for n in nodes), {n: keys[n] for n in nodes}
+    # no pulse on a state older than the bound: by the bridge's own record and by the recorded poses
+    ages = m["pulse_ages"]
+    assert ages["pulses"] >= 5 and ages["stale"] == 0, ages
+    assert ages["claimed"]["max"] <= 0.5 and ages["published"]["max"] <= 0.5, ages
+
+
+def _diagnostics_keys(files) -> dict:
+    """{node: the keys of its diagnostics values} from the recording."""
+    from frog_logger.core.log_files import read_messages
+    keys = {}
+    for f in files:
+        for _, _, msg in read_messages(f, ["/diagnostics"]):
+            for st in msg.status:
+                keys.setdefault(st.name.split(":", 1)[0], set()).update(kv.key for kv in st.values)
+    return keys
 
 
 def _header_stamps(files, topic) -> list:

@@ -23,3 +23,14 @@ def test_the_message_files_bit_table_is_the_shared_one():
     rows = {name: (int(i), bits) for i, name, bits in re.findall(r"(\d)\s+([A-I])\s+([01]{4})", text)}
     assert {n: b for n, (_, b) in rows.items()} == PRIMITIVE_BITS
     assert {n: i for n, (i, _) in rows.items()} == PRIMITIVE_IDS
+
+
+def test_the_tracker_and_planner_state_codes_are_the_messages():
+    from frog_planner.core import decision_loop
+    from frog_vision.core import tracking_state
+    from soft_robot_interfaces.msg import PlannerStatus, TrackerState
+    for name in ("SEARCHING", "TRACKING", "COASTING", "LOST", "FROZEN"):
+        assert getattr(tracking_state, name) == getattr(TrackerState, f"STATE_{name}")
+    assert tracking_state.STATE_NAMES[TrackerState.STATE_COASTING] == "coasting"
+    for name in ("IDLE", "FOLLOWING", "GOAL_REACHED", "WAITING", "ERROR"):
+        assert getattr(decision_loop, name) == getattr(PlannerStatus, f"STATE_{name}")

@@ -23,6 +23,7 @@ setup(
             'frog-planner-eval = frog_twin.eval_cli:main',
             'image_preview = frog_twin.nodes.image_preview:main',
             'frog-twin = frog_twin.twin:main',
+            'frog-outside-faults = frog_twin.outside_faults:main',
         ],
     },
 )

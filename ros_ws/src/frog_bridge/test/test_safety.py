@@ -6,7 +6,7 @@ import pytest
 from soft_robot_common.link_state import LinkState, LinkSupervisor
 from frog_bridge.core.protection import LimbGuard, PlannedPulse, ProtectionConfig
 from frog_bridge.core.schedule import (
-    CANCELLED_OVERLAP, REFUSED_DUTY, REFUSED_INTERVAL, REFUSED_INVALID, REFUSED_STALE, CommandScheduler)
+    CANCELLED_OVERLAP, REFUSED_DUTY, REFUSED_INTERVAL, REFUSED_INVALID, REFUSED_STATE_AGE, CommandScheduler)
 
 P = 0.08
 B, C, D, H, I_ = 1, 2, 3, 7, 8
@@ -32,18 +32,18 @@ def test_primitive_front_now_rear_one_pulse_later():
     assert run(s, 10.0) == [(10.0, (1, 0))]
     assert s.next_due() == pytest.approx(10.08)
     assert run(s, 10.081) == [(10.08, (2, 3))]
-    assert s.submit_primitive(I_, None, 11.0).pulses == []       # I sends nothing
+    assert s.submit_primitive(I_, 0.0, 11.0).pulses == []       # I sends nothing
 
 
 def test_too_fast_repeat_is_refused_whole_and_counted():
     s = sched()
-    s.submit_primitive(B, None, 0.0)
+    s.submit_primitive(B, 0.0, 0.0)
     run(s, 0.1)
-    d = s.submit_primitive(D, None, 0.5)            # FR again after 0.5 s < 0.8 s
+    d = s.submit_primitive(D, 0.0, 0.5)            # FR again after 0.5 s < 0.8 s
     assert not d.accepted and d.refused == REFUSED_INTERVAL and "FR" in d.reason
     assert s.pending == []                          # nothing of D is scheduled (no rear only)
     assert s.counts[REFUSED_INTERVAL] == 1
-    assert s.submit_primitive(D, None, 0.81).accepted   # the limit, not a lockout
+    assert s.submit_primitive(D, 0.0, 0.81).accepted   # the limit, not a lockout
 
 
 def test_duty_cycle_bound_is_a_sliding_window():
@@ -51,14 +51,14 @@ def test_duty_cycle_bound_is_a_sliding_window():
     s = sched(interval=0.0, duty=0.2, window=1.0)
     t, accepted = 0.0, 0
     for _ in range(5):                               # H (FR) every 0.1 s
-        d = s.submit_primitive(H, None, t)
+        d = s.submit_primitive(H, 0.0, t)
         accepted += d.accepted
         run(s, t)
         t += 0.1
     assert accepted == 2
     assert s.counts[REFUSED_DUTY] == 3
     # after the window has passed the limb may be heated again
-    assert s.submit_primitive(H, None, 1.25).accepted
+    assert s.submit_primitive(H, 0.0, 1.25).accepted
 
 
 def test_default_limits_let_the_authors_gait_through():
@@ -67,55 +67,82 @@ def test_default_limits_let_the_authors_gait_through():
         s = sched()
         t = 0.0
         while t < 60:
-            assert s.submit_primitive(B, None, t).accepted, (period, t)
+            assert s.submit_primitive(B, 0.0, t).accepted, (period, t)
             run(s, t + 0.2)
             t += period
     # but a sustained 0.8 s train is cut by the duty bound (80 ms / 0.8 s = 10 % > 9.6 %)
     s = sched()
     results = []
     for k in range(40):
-        results.append(s.submit_primitive(H, None, 0.8 * k).accepted)
+        results.append(s.submit_primitive(H, 0.0, 0.8 * k).accepted)
         run(s, 0.8 * k)
     assert all(results[:12]) and not all(results)
 
 
 def test_new_primitive_cancels_a_pending_rear_only_if_they_overlap():
     s = sched(interval=0.0, duty=1.0)
-    s.submit_primitive(B, None, 0.0)
+    s.submit_primitive(B, 0.0, 0.0)
     run(s, 0.0)                                      # B's rear (BL, BR) pending at 0.08
-    d = s.submit_primitive(H, None, 0.03)            # H: FR only: no overlap
+    d = s.submit_primitive(H, 0.0, 0.03)            # H: FR only: no overlap
     assert d.accepted and d.cancelled == []
     run(s, 0.03)
-    d = s.submit_primitive(C, None, 0.05)            # C's rear BL+BR at 0.13 overlaps B's rear
+    d = s.submit_primitive(C, 0.0, 0.05)            # C's rear BL+BR at 0.13 overlaps B's rear
     assert d.accepted and [p.label for p in d.cancelled] == ["B rear"]
     assert s.counts[CANCELLED_OVERLAP] == 1
     assert [p.label for p in s.pending] == ["C front", "C rear"]
     # a refused command cancels nothing
     s = sched()
-    s.submit_primitive(B, None, 0.0)
+    s.submit_primitive(B, 0.0, 0.0)
     run(s, 0.0)
-    d = s.submit_primitive(B, None, 0.05)
+    d = s.submit_primitive(B, 0.0, 0.05)
     assert not d.accepted and [p.label for p in s.pending] == ["B rear"]
 
 
-def test_stale_commands_are_dropped_not_replayed():
+def test_a_command_on_a_stale_state_is_refused_whole_and_never_replayed():
     s = sched(age=0.5)
-    d = s.submit_primitive(B, stamp=1.0, now=2.0)
-    assert d.refused == REFUSED_STALE and "1.000 s old" in d.reason
-    d = s.submit_primitive(B, stamp=10.0, now=2.0)
-    assert d.refused == REFUSED_STALE and "future" in d.reason
-    # a pulse not written in time (the executor was blocked) is dropped when finally due
-    s.submit_primitive(B, stamp=None, now=3.0)
-    out, stale = s.pop_due(5.0)
-    assert out == [] and len(stale) == 2 and s.counts[REFUSED_STALE] == 4
+    # the state is the command's state stamp; B's rear pair is due one pulse later: 0.45 + 0.08 > 0.5
+    d = s.submit_primitive(B, stamp=2.0, now=2.0, state_stamp=1.55)
+    assert d.refused == REFUSED_STATE_AGE and "0.530 s old" in d.reason and s.pending == []
+    # a primitive whose pairs both fire within the bound is accepted (H: front only, due now)
+    assert s.submit_primitive(H, stamp=2.0, now=2.0, state_stamp=1.55).accepted
+    # without a state stamp the header stamp is the state; with neither, now
+    d = s.submit_primitive(B, stamp=1.0, now=3.0)
+    assert d.refused == REFUSED_STATE_AGE and "2.080 s old" in d.reason
+    d = s.submit_limbs([2], 0.0, 3.0, state_stamp=10.0)
+    assert d.refused == REFUSED_STATE_AGE and "future" in d.reason
+    assert s.submit_limbs([3], 0.0, 3.0).accepted
+    # a pending pulse whose state has grown too old by its write (a blocked executor) is dropped
+    s = sched(age=0.5)
+    s.submit_primitive(B, stamp=3.0, now=3.0, state_stamp=2.9)
+    out, stale = s.pop_due(3.45)
+    assert out == [] and [p.label for p in stale] == ["B front", "B rear"] and s.counts[REFUSED_STATE_AGE] == 2
+    assert s.pop_due(10.0) == ([], []) and s.pending == []          # nothing comes back later
+
+
+def test_no_pulse_is_ever_written_on_a_state_older_than_the_bound():
+    """Property: random commands on random state ages, written by timers that run late; every
+    pulse written satisfies write time - state stamp <= max_state_age_s."""
+    rng = np.random.default_rng(3)
+    bound = 0.5
+    s = CommandScheduler(LimbGuard(ProtectionConfig(0.0, 1.0, 10.0)), P, bound)
+    t, written, refused = 0.0, 0, 0
+    for _ in range(4000):
+        t += float(rng.exponential(0.1))
+        for p in s.pop_due(t)[0]:
+            assert t - p.state <= bound + 1e-12
+            written += 1
+        age = float(rng.uniform(0.0, 0.8))
+        d = s.submit_primitive(int(rng.integers(8)), t, t, state_stamp=t - age)
+        refused += not d.accepted
+    assert written > 1000 and refused > 1000
 
 
 def test_invalid_limb_commands():
     s = sched()
     for limbs in ([], [0, 0], [4]):
-        assert s.submit_limbs(limbs, None, 0.0).refused == REFUSED_INVALID
-    assert s.submit_primitive(9, None, 0.0).refused == REFUSED_INVALID
-    d = s.submit_limbs([0, 2], None, 0.0)
+        assert s.submit_limbs(limbs, 0.0, 0.0).refused == REFUSED_INVALID
+    assert s.submit_primitive(9, 0.0, 0.0).refused == REFUSED_INVALID
+    d = s.submit_limbs([0, 2], 0.0, 0.0)
     assert d.accepted and d.pulses[0].limbs == (0, 2)
 
 
@@ -123,11 +150,11 @@ def test_non_finite_or_negative_pulse_length_is_refused_not_fired():
     # abs(nan - 0.08) > tol is False: a NaN must not pass as "close to the bridge's pulse"
     s = sched()
     for bad in (float("nan"), float("inf"), -float("inf"), -1.0, 0.2):
-        d = s.submit_limbs([1], None, 0.0, pulse_s=bad)
+        d = s.submit_limbs([1], 0.0, 0.0, pulse_s=bad)
         assert d.refused == REFUSED_INVALID and "pulse_duration" in d.reason, bad
     assert s.pending == [] and s.counts[REFUSED_INVALID] == 5
-    assert s.submit_limbs([1], None, 0.0, pulse_s=P).accepted
-    assert s.submit_limbs([2], None, 0.0, pulse_s=0.0).accepted
+    assert s.submit_limbs([1], 0.0, 0.0, pulse_s=P).accepted
+    assert s.submit_limbs([2], 0.0, 0.0, pulse_s=0.0).accepted
 
 
 def test_guard_clock_jump_back_clears_history():
@@ -152,9 +179,9 @@ def test_random_commands_never_break_the_limits():
             for limb in p.limbs:
                 written[limb].append(p.due)
         if rng.random() < 0.7:
-            s.submit_primitive(int(rng.integers(9)), None, t)
+            s.submit_primitive(int(rng.integers(9)), 0.0, t)
         else:
-            s.submit_limbs(list(rng.choice(4, size=rng.integers(1, 4), replace=False)), None, t)
+            s.submit_limbs(list(rng.choice(4, size=rng.integers(1, 4), replace=False)), 0.0, t)
     for limb, starts in written.items():
         starts = np.array(starts)
         assert len(starts) > 50

@@ -2,9 +2,10 @@
 
 Each run is one :func:`frog_twin.twin.run_twin` with one fault (``--fault-classes``: one
 run per fault class, several faults in it: the reduced form the system tests run). The
-summary has per fault: runs completed / stopped cleanly / failed, limb firings on state
-older than the bound (must be 0), messages the recorder lost while it was up (must be 0),
-and the time to recover (simulated s from the fault's end until the planner follows again).
+summary has per fault: runs completed / stopped with a reason / failed, the limb pulses and
+those on a state older than the bound, by the recording's audit (must be 0), the oldest state
+any pulse rested on, messages the recorder lost while it was up (must be 0), and the time to
+recover (simulated s from the fault's end until the planner follows again).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from pathlib import Path
 from frog_common.atomic_files import atomic_write_text
 from frog_twin.core.faults import CAMPAIGN_FAULTS, CAMPAIGN_MOMENTS, FAULT_CLASSES, campaign_plan, parse_faults
 
-#: the paths' nominal times [s simulated] on the twin (main job, issue 18 model), for the moments
+#: the paths' nominal times [s simulated] on the twin (the main job), for the moments
 NOMINAL_TIME_S = {"line": 15.7, "sine": 14.3, "ellipse": 24.3}
 
 
@@ -103,11 +104,11 @@ def _run_one(args, run_path, out: Path, label: str, path: str, seed: int, faults
         rep = m["faults"]
     except Exception as exc:      # a run that breaks is a finding of the campaign, not its end
         rep = {"outcome": "failed", "stop_reason": f"{type(exc).__name__}: {exc}",
-               "traceback": traceback.format_exc(), "stale_firings": [], "recorder_lost": 0,
+               "traceback": traceback.format_exc(), "stale_pulses": [], "recorder_lost": 0,
                "per_fault": [{"fault": f.label(), "recovery_s": None} for f in faults]}
     rep.update(label=label, path=path, seed=seed, wall_s=round(time.monotonic() - started, 1))
     print(f"    -> {rep['outcome']}" + (f" ({rep['stop_reason']})" if rep.get("stop_reason") else "")
-          + f"; stale firings {len(rep['stale_firings'])}, recorder lost {rep['recorder_lost']}", flush=True)
+          + f"; pulses on stale state {len(rep['stale_pulses'])}, recorder lost {rep['recorder_lost']}", flush=True)
     # written whole (a rename): an interrupted campaign resumes from these files (same --out)
     atomic_write_text(_result_file(out, label), json.dumps(rep, indent=1, default=float) + "\n")
 
@@ -124,20 +125,22 @@ def summary_table(results) -> str:
     for r in results:
         for pf in r["per_fault"]:
             row = rows.setdefault(_kind(pf["fault"]), {"runs": 0, "completed": 0, "stopped": 0, "failed": 0,
-                                                       "stale": 0, "unverified": 0, "lost": 0, "recovery": [],
-                                                       "never": 0})
+                                                       "stale": 0, "pulses": 0, "oldest": 0.0, "lost": 0,
+                                                       "recovery": [], "never": 0})
             row["runs"] += 1
             row[r["outcome"]] += 1
-            row["stale"] += len(r["stale_firings"])
-            row["unverified"] += len(r.get("unverified_firings", []))
+            row["stale"] += len(r["stale_pulses"])
+            ages = r.get("pulse_ages") or {}
+            row["pulses"] += ages.get("pulses", 0)
+            row["oldest"] = max(row["oldest"], (ages.get("published") or {}).get("max", 0.0))
             row["lost"] += r["recorder_lost"]
             if pf.get("recovery_s") is None:
                 row["never"] += 1
             else:
                 row["recovery"].append(pf["recovery_s"])
-    lines = ["| fault | runs | completed | stopped cleanly | failed | firings on stale state | unverified firings "
-             "| recorder lost | recovery median / max [s] | not recovered |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| fault | runs | completed | stopped with a reason | failed | pulses | pulses on stale state "
+             "| oldest state at a pulse [s] | recorder lost | recovery median / max [s] | not recovered |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for kind, row in rows.items():
         rec = row["recovery"]
         rec_text = f"{statistics.median(rec):.1f} / {max(rec):.1f}" if rec else "-"
@@ -145,5 +148,6 @@ def summary_table(results) -> str:
         if kind == "emergency":      # latched until a person clears it: the run stops, by design
             rec_text, never = "by a person", "-"
         lines.append(f"| {kind} | {row['runs']} | {row['completed']} | {row['stopped']} | {row['failed']} | "
-                     f"{row['stale']} | {row['unverified']} | {row['lost']} | {rec_text} | {never} |")
+                     f"{row['pulses']} | {row['stale']} | {row['oldest']:.3f} | {row['lost']} | {rec_text} | "
+                     f"{never} |")
     return "\n".join(lines)

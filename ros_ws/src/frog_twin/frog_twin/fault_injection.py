@@ -1,12 +1,13 @@
-"""The twin's fault injector and observer (issue 22), on the twin's watch node.
+"""The twin's fault injector and observer, on the twin's watch node.
 
 :class:`FaultInjector` turns :class:`frog_twin.core.faults.Fault` items into actions at
 their simulated times: live parameters of camera_sim, robot_emulator and sim_node (their
 fault hooks), the emulator's fault services, and signals to node processes through the
 run's :class:`soft_robot_common.supervision.Supervisor`. :class:`RunObserver` records what
-the metrics need (odometry stamps, decisions, firings, planner states, the recorder's
-subscriptions) on the watch's own subscriptions, so the record does not depend on the
-recorder, which is one of the nodes under test.
+the metrics need (decisions, firings, planner states, the recorder's subscriptions) on the
+watch's own subscriptions, so the record does not depend on the recorder, which is one of the
+nodes under test, and feeds the run's :class:`soft_robot_common.liveness.LivenessMonitor`
+with every arrival and typed diagnostics value it sees.
 """
 
 from __future__ import annotations
@@ -20,6 +21,9 @@ from frog_twin.core.faults import Observed, Resubscription, restart_windows
 DISCOVERY_S = 3.0
 #: topics whose messages the recorder must not lose while it is up (stamped, reliable)
 CHECKED_TOPICS = ("/frog/primitive", "/frog/planner/status", "/frog/bridge/sent", "/frog/limb_activation")
+#: PlannerStatus / TrackerState codes as the liveness section's typed values
+PLANNER_STATES = ("idle", "following", "goal_reached", "waiting", "error")
+TRACKER_STATES = ("searching", "tracking", "coasting", "lost", "frozen")
 
 
 #: History of the watch's subscriptions: 5000 odometry messages are 2.8 min at 30 Hz.
@@ -31,92 +35,94 @@ def _stamp(msg) -> float:
 
 
 class RunObserver:
-    """Subscriptions of the watch node: sim time, odometry, decisions, firings, diagnostics."""
+    """Subscriptions of the watch node: sim time, odometry, decisions, firings, diagnostics, tracker
+    states; every arrival and diagnostics value also goes to ``monitor`` (a LivenessMonitor, or None)."""
 
-    def __init__(self, node, deaf=None, recorder_watch=None):
+    def __init__(self, node, monitor=None):
         from diagnostic_msgs.msg import DiagnosticArray
         from nav_msgs.msg import Odometry
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
-        from soft_robot_interfaces.msg import LimbActivation, PlannerStatus, Primitive
+        from soft_robot_interfaces.msg import LimbActivation, PlannerStatus, Primitive, TrackerState
         self.node = node
-        self.deaf = deaf                # a frog_twin.core.liveness.DeafWatch fed from /diagnostics, or None
-        self.recorder_watch = recorder_watch    # a frog_twin.core.liveness.RecorderWatch, or None
+        self.monitor = monitor
         self.recorder_deaf = []         # [(sim t0, sim t1, topic)]: the recorder alive, recording nothing on topic
         self.recorder_unready = []      # [(sim t0, sim t1)]: a restarted recorder that never got ready
         self.obs = Observed()
         self.seen = {t: [] for t in CHECKED_TOPICS}
         self.sim_now = None
-        self._arrivals = 0
-        self.emergency = None
         self.recorder_up = []           # [(sim t0, sim t1)] with the recorder subscribed to CHECKED_TOPICS
         self.restarts = []              # sim times of node restarts (see discovery_gaps)
-        self.planner_restarts = []      # sim times of planner_node's restarts
         self.resubscription = Resubscription(CHECKED_TOPICS)    # a restarted recorder's own subscriptions
         self._up_since = None
         self._unready_since = None      # sim time of the recorder's restart, until it is ready
         # deep: the checks need every message, and a reliable keep-last reader still drops the oldest
-        # when its owner does not take them for a while (100 odometry messages are 3.3 s at 30 Hz). A
-        # CI run's watch had no odometry for 5 s while the planner went on deciding on fresh poses,
-        # and judged its firings stale; a watch busy for > 3.3 s is one way that happens
+        # when its owner does not take them for a while (100 odometry messages are 3.3 s at 30 Hz)
         reliable = QoSProfile(depth=WATCH_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         node.create_subscription(Clock, "/clock", self._on_clock, QoSProfile(depth=1,
                                  reliability=ReliabilityPolicy.BEST_EFFORT))
         node.create_subscription(Odometry, "/frog/odom", lambda m: self.obs.odom.append(_stamp(m)), reliable)
         node.create_subscription(Primitive, "/frog/primitive", self._on_primitive, reliable)
         node.create_subscription(PlannerStatus, "/frog/planner/status", self._on_status, reliable)
+        node.create_subscription(TrackerState, "/frog/tracker/state", self._on_tracker_state, reliable)
         node.create_subscription(LimbActivation, "/frog/bridge/sent",
-                                 lambda m: self.seen["/frog/bridge/sent"].append(_stamp(m)), reliable)
+                                 lambda m: self._arrived("/frog/bridge/sent", m), reliable)
         node.create_subscription(LimbActivation, "/frog/limb_activation", self._on_fired, reliable)
         node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, reliable)
 
+    # -- arrivals -----------------------------------------------------------------------------
+    def _tell(self, topic: str) -> None:
+        if self.monitor is not None:
+            self.monitor.message(topic, time.monotonic(), self.sim_now)
+
+    def _arrived(self, topic: str, msg) -> float:
+        t = _stamp(msg)
+        self.seen[topic].append(t)
+        self._tell(topic)
+        return t
+
     def _on_clock(self, msg) -> None:
-        self.sim_now = msg.clock.sec + msg.clock.nanosec * 1e-9
+        t = msg.clock.sec + msg.clock.nanosec * 1e-9
+        advanced = self.sim_now is None or t > self.sim_now
+        self.sim_now = t
+        if advanced:                    # a paused simulator publishes the same time: no heartbeat
+            self._tell("/clock")
 
     def _on_primitive(self, msg) -> None:
-        t = _stamp(msg)
-        self.seen["/frog/primitive"].append(t)
-        self.obs.decisions.append((t, msg.name))
-        self.obs.decision_seq.append(self._next())
-
-    def _next(self) -> int:
-        self._arrivals += 1
-        return self._arrivals
+        self.obs.decisions.append((self._arrived("/frog/primitive", msg), msg.name))
 
     def _on_status(self, msg) -> None:
-        t = _stamp(msg)
-        self.seen["/frog/planner/status"].append(t)
+        t = self._arrived("/frog/planner/status", msg)
         self.obs.status.append((t, int(msg.state)))
-        self.obs.pose_ages.append((t, float(msg.pose_age)))
+        if self.monitor is not None and msg.state < len(PLANNER_STATES):
+            self.monitor.value("planner_node", "status", PLANNER_STATES[msg.state], time.monotonic(), self.sim_now)
+
+    def _on_tracker_state(self, msg) -> None:
+        self._tell("/frog/tracker/state")
+        if self.monitor is not None and msg.state < len(TRACKER_STATES):
+            self.monitor.value("tracker_node", "frame_state", TRACKER_STATES[msg.state], time.monotonic(),
+                               self.sim_now)
 
     def _on_fired(self, msg) -> None:
-        t = _stamp(msg)
-        self.seen["/frog/limb_activation"].append(t)
+        t = self._arrived("/frog/limb_activation", msg)
         if len(msg.limbs):
             self.obs.fired.append(t)
-            self.obs.fired_seq.append(self._next())
 
     def _on_diagnostics(self, msg) -> None:
-        for st in msg.status:
-            if "serial link" in st.name and "EMERGENCY" in st.message and self.emergency is None:
-                self.emergency = st.message
-            if self.deaf is not None and st.name.startswith(("camera_sim:", "tracker_node:")):
-                frames = next((kv.value for kv in st.values if kv.key == "frames"), None)
-                if frames is not None and frames.isdigit():
-                    feed = self.deaf.camera if st.name.startswith("camera_sim:") else self.deaf.tracker
-                    feed(time.monotonic(), int(frames))
-            if self.recorder_watch is not None and st.name.startswith("recorder:"):
-                counts = {kv.key[len("messages "):]: int(kv.value) for kv in st.values
-                          if kv.key.startswith("messages ") and kv.value.isdigit()}
-                self.recorder_watch.recorded(time.monotonic(), _stamp(msg), counts)
+        if self.monitor is None:
+            return
+        for st in msg.status:               # "<node>: <what>" (NodeDiagnostics); the values are typed
+            node = st.name.split(":", 1)[0]
+            self.monitor.diagnostics(node, {kv.key: kv.value for kv in st.values}, time.monotonic(), self.sim_now)
 
+    # -- the recorder's record ----------------------------------------------------------------
     def seen_counts(self) -> dict:
         """{checked topic: messages this node saw on it so far}."""
         return {t: len(stamps) for t, stamps in self.seen.items()}
 
     def recorder_went_deaf(self, topic: str, heard_at) -> None:
-        """The recorder recorded nothing on ``topic`` since ``heard_at`` (its diagnostics' stamp, or
-        None): it was not up since then (it is killed and restarted next)."""
+        """The recorder recorded nothing on ``topic`` since ``heard_at`` (simulated time, or None):
+        it was not up since then (it is killed and restarted next)."""
         if self.sim_now is None:
             return
         known = [t for t in (heard_at, self._up_since) if t is not None]
@@ -129,8 +135,6 @@ class RunObserver:
     def node_restarted(self, name: str) -> None:
         if self.sim_now is not None:
             self.restarts.append(self.sim_now)
-            if name == "planner_node":
-                self.planner_restarts.append(self.sim_now)
             if name == "recorder":
                 self._close_unready()        # its predecessor was killed or exited before it got ready
                 self._unready_since = self.sim_now
@@ -158,23 +162,11 @@ class RunObserver:
                     if i.node_name == "recorder"]
             self.resubscription.seen(self.sim_now, topic, gids)
 
-    def odom_blind(self, witness_odom=()) -> list:
-        """[(t0, t1)]: from each node restart to DISCOVERY_S after the first odometry this node or
-        the witness (the recording) saw after it: a restarted tracker's publisher is matched by
-        each subscriber after its own discovery, the planner's possibly seconds before theirs."""
-        return restart_windows(self.restarts, [*self.obs.odom, *witness_odom], DISCOVERY_S)
-
-    def planner_blind(self) -> list:
-        """[(t0, t1)]: from each planner restart to DISCOVERY_S after the first decision seen from it
-        (until then this node may not have matched the new planner's publisher)."""
-        return restart_windows(self.planner_restarts, [t for t, _ in self.obs.decisions], DISCOVERY_S)
-
     def watch_recorder(self, subscribed: bool, ready: bool = True) -> None:
         """Called every poll with whether the recorder is subscribed to every checked topic, and whether
-        it is ready (a restarted one: its log says it subscribed to the planner's topics). Up needs both:
-        the graph still shows a killed recorder's subscriptions until their lease ends, and a restarted
-        recorder that met the restarted-reader wedge may be subscribed to a topic and receive nothing on it
-        (session 33's series) while it is not watched for deafness (it is recovering)."""
+        it is ready (its typed diagnostics). Up needs both: the graph still shows a killed recorder's
+        subscriptions until their lease ends, and a restarted recorder may be subscribed to a topic and
+        receive nothing on it while it is not watched for deafness (it is recovering)."""
         if self.sim_now is None:
             return
         up = subscribed and ready

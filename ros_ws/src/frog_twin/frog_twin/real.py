@@ -12,17 +12,16 @@ because the stop has several receivers that must all act at once (the planner st
 deciding, the bridge cancels its scheduled pulses and refuses new ones until
 ``~/clear_emergency``) and a sender must not wait for any of them to answer; any tool can
 send it (``ros2 topic pub --once /frog/stop std_msgs/msg/Empty``). ``frog-twin`` itself
-sends it on Ctrl-C, when the tag has been lost for longer than ``--tag-lost-timeout``
-(unless the tracker is stuck rather than blind: then it is restarted, see
-:func:`frog_twin.core.liveness.tracker_stuck`), when a node of the loop is out of restarts
-(a crashed node is restarted with back-off, as in the twin), at the goal and at ``--duration``; then it writes the same
-report as the twin (trajectory PNG, MP4 with the overlay, JSON, MCAP), measured on the
+sends it on Ctrl-C, when a liveness contract of the graph file says so (the tag not seen for
+``tag_lost_after_s``, a latched emergency; a tracker that hears nothing while the camera
+publishes is restarted instead), when a node of the loop is out of restarts (a crashed node is
+restarted with back-off, as in the twin), at the goal and at ``--duration``; then it writes the
+same report as the twin (trajectory PNG, MP4 with the overlay, JSON, MCAP), measured on the
 tracked pose since there is no ground truth.
 """
 
 from __future__ import annotations
 
-import bisect
 import json
 import math
 import time
@@ -35,7 +34,6 @@ from soft_robot_common.graph import load_graph
 from soft_robot_common.tool_signals import redirect_stop_signals
 
 from frog_twin.core import twin_report
-from frog_twin.core.liveness import tracker_stuck
 from frog_twin.core.metrics import best_window_rate
 from frog_twin.core.twin_recording import read_twin_recording
 from frog_common.se2 import yaw_of
@@ -119,8 +117,6 @@ class RealWatch:
         self.imu = 0
         self.link_state = None
         self.link_message = None
-        self.tracker_says = None  # the tracker's last diagnostics message ("tracking", "tag lost: ...")
-        self.tracker_said_at = None   # its monotonic arrival
         self.stops = 0
         self.interrupted = []     # Ctrl-C, SIGTERM, SIGHUP (the stop-signal handler of run_real)
         # camera_node publishes one camera_info per frame (with its size): the rate without the pixels
@@ -146,16 +142,10 @@ class RealWatch:
 
     def _on_diag(self, msg) -> None:
         for s in msg.status:
-            if s.name.endswith("serial link"):
+            if s.name.startswith("bridge_node:"):
                 values = {kv.key: kv.value for kv in s.values}
                 self.link_state = values.get("state")
                 self.link_message = s.message
-            elif s.name.startswith("tracker_node:"):
-                self.tracker_says, self.tracker_said_at = s.message, time.monotonic()
-
-    def frames_since(self, t: float) -> int:
-        """Camera frames (camera_info messages) that arrived after monotonic time ``t``."""
-        return len(self.frames) - bisect.bisect_right(self.frames, t, key=lambda f: f[0])
 
     def _on_stop(self, msg) -> None:
         self.stops += 1
@@ -293,53 +283,37 @@ def preflight(args, watch: RealWatch, procs, path, timeout: float = PREFLIGHT_TI
     return checks
 
 
-#: Nodes whose downtime (a crash until the restarted node's first pose) is not the tag lost:
-#: the pose comes through them. The planner decides nothing on a stale pose meanwhile.
-VISION_NODES = ("camera_node", "tracker_node")
-#: How long a restarted vision node may take to deliver its first pose (a Python node's
-#: start-up, DDS discovery, the camera opening) before the tag counts as lost [s].
-VISION_RESTART_GRACE_S = 20.0
-# a restarted tracker that has tracked nothing within the twin's RESTART_READY_TIMEOUT_S is hung
-# (docs/faults.md): killed and restarted again, which also restarts the grace above
-REAL_RESTART_READY = {"tracker_node": "tag tracking"}
-
-
 def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
     """One run on the real robot: pre-flight, follow, stop, report. Raises PreflightError.
 
-    While following, a node that exits is restarted with back-off (:class:`Supervisor`, as in
-    the twin; a planner resumes at its progress); out of restarts, the run stops with the reason.
+    While following, a node that exits is restarted with back-off (as in the twin; a planner
+    resumes at its progress); out of restarts, or when a liveness contract of the graph file says
+    so (the tag lost, an emergency), the run stops with the reason.
     """
-    from soft_robot_common.processes import acquire_domain
-    from soft_robot_common.supervision import RestartPolicy, Supervisor
-
     from frog_twin.core.twin_recording import recordings
-    from frog_twin.twin import RESTART_READY_TIMEOUT_S, _restarter
+    from frog_twin.fault_injection import RunObserver
+    from frog_twin.supervised_run import SupervisedGraph, graph_liveness, run_domain
+    from frog_twin.twin import GRAPH_FILE, _restarter
     out.mkdir(parents=True, exist_ok=True)
     earlier = recordings(out / "recording")
     graph = real_graph(args, name, out, path_settings, settings)
     path = path_settings.build()
-    if args.domain is not None:
-        from soft_robot_common.processes import RosDomain
-        base = acquire_domain()     # the environment; the caller's domain id replaces the held one
-        base.release()
-        env = dict(base.env, ROS_DOMAIN_ID=str(args.domain))
-        domain = RosDomain(args.domain, env)
-    else:
-        domain = acquire_domain()
+    domain = run_domain(args.domain)
     watch = RealWatch(domain)
-    supervisor = Supervisor(RestartPolicy(), log=lambda s: print("  " + s, flush=True))
+    liveness = graph_liveness(getattr(args, "graph_file", None) or GRAPH_FILE, "real", graph.names(),
+                              getattr(args, "budgets", None))
+    run = SupervisedGraph(graph, liveness, domain.env, out, lambda node: _restarter(node, domain, out, watch.base),
+                          time.monotonic, log=lambda s: print("  " + s, flush=True))
+    RunObserver(watch.base.node, run.monitor)            # arrivals and typed diagnostics to the monitor
     reference = None             # the reference sim_node: outside the loop, not supervised
     interrupted = watch.interrupted
     restore_signals = redirect_stop_signals(interrupted.append)     # Ctrl-C, SIGTERM, SIGHUP: a graceful stop
     reason = None
     t_start = None
     try:
-        for node in graph:
-            supervisor.add(node.name, node.start(domain.env, out), _restarter(node, domain, out, watch.base),
-                           ready=REAL_RESTART_READY.get(node.name), ready_timeout_s=RESTART_READY_TIMEOUT_S)
+        run.start()
         # before the start a node's exit fails the pre-flight (nothing restarts it: nothing to resume)
-        checks = preflight(args, watch, supervisor.processes(), path, args.preflight_timeout)
+        checks = preflight(args, watch, run.supervisor.processes(), path, args.preflight_timeout)
         for c in checks:
             print(f"  pre-flight {c.name:11s} {'ok  ' if c.ok else 'FAIL'} {c.message}", flush=True)
         (out / "preflight.json").write_text(json.dumps([c.__dict__ for c in checks], indent=1) + "\n")
@@ -352,51 +326,24 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
             reference = reference_sim_node(args, watch.poses[-1][1:]).start(domain.env, out)
         recorded = ("/frog/odom", "/frog/primitive", "/frog/planner/status")
         watch.base.wait(lambda: watch.base.subscribed("recorder", recorded), 30,
-                        "the recorder subscribed to the loop's topics", supervisor.processes())
+                        "the recorder subscribed to the loop's topics", run.supervisor.processes())
         watch.base.start_planner()
         t_start = time.monotonic()
+        run.monitor.restart(t_start, t_start)                  # the pre-flight does not count as silence
         print(f"  {name}: following on the real robot (at most {args.duration:.0f} s; Ctrl-C or "
               f"/frog/stop stops)", flush=True)
-        restarting = None         # a vision node was down at this time and no pose has come since
         while reason is None:
             watch.spin(0.05)
-            now = time.monotonic()
-            down = supervisor.poll(now)
-            if any(n in supervisor.names() and supervisor.down(n) for n in VISION_NODES):
-                restarting = now
-            last_pose = max(t_start, watch.poses[-1][0] if watch.poses else t_start)
-            if restarting is not None and last_pose > restarting:
-                restarting = None
-            lost = (now - restarting > VISION_RESTART_GRACE_S if restarting is not None
-                    else now - last_pose > args.tag_lost_timeout)
             if interrupted:
                 reason = interrupted[0]
             elif watch.stops:
                 reason = "stop received on /frog/stop"
-            elif down:
-                reason = down
             elif watch.base.state == watch.base.Status.STATE_GOAL_REACHED:
                 reason = "goal reached"
-            elif now - t_start > args.duration:
+            elif time.monotonic() - t_start > args.duration:
                 reason = f"duration {args.duration:g} s"
-            elif lost and "tracker_node" in supervisor.names() and not supervisor.down("tracker_node") \
-                    and tracker_stuck(watch.frames_since(last_pose), watch.tracker_says, said_at=watch.tracker_said_at,
-                                      last_pose_at=watch.poses[-1][0] if watch.poses else None):
-                # the tracker, not the tag: it never said the tag was lost (liveness.tracker_stuck); a
-                # restarted one can wedge too after its first frames (docs/faults.md): killed again,
-                # until the supervisor is out of restarts
-                since = (f"within {VISION_RESTART_GRACE_S:g} s of a restart" if restarting is not None
-                         else f"for {now - last_pose:.1f} s")
-                word = repr(watch.tracker_says)
-                if watch.poses and watch.tracker_said_at is not None and watch.poses[-1][0] > watch.tracker_said_at:
-                    word = f"a pose (after {word})"
-                supervisor.kill_hung("tracker_node", f"stuck: no pose {since} while the camera published "
-                                                     f"{watch.frames_since(last_pose)} frames, and its last word "
-                                                     f"was {word}")
-                restarting = now
-            elif lost:
-                reason = (f"tag lost for more than {args.tag_lost_timeout:g} s" if restarting is None else
-                          f"no pose within {VISION_RESTART_GRACE_S:g} s of a vision node's restart")
+            else:
+                reason = run.poll()
         watch.stop_all()
         t_stop = time.monotonic()
         print(f"  {name}: stopped ({reason})", flush=True)
@@ -405,14 +352,13 @@ def run_real(args, name: str, out: Path, path_settings, settings) -> dict:
         if reason is None:
             watch.stop_all()
         restore_signals()
-        supervisor.stop_all()
+        run.supervisor.stop_all()
         if reference is not None and reference.running():
             reference.stop()
         watch.close()
         domain.release()
-    metrics = real_report(args, name, out, settings, path_settings, reason, t_stop - t_start, checks,
-                          supervisor.summary(), earlier)
-    return metrics
+    summary = dict(run.supervisor.summary(), liveness_verdicts=run.verdicts)
+    return real_report(args, name, out, settings, path_settings, reason, t_stop - t_start, checks, summary, earlier)
 
 
 def real_report(args, name, out, settings, path_settings, reason, wall, checks, supervision=None,

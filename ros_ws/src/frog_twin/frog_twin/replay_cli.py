@@ -28,6 +28,8 @@ from frog_planner.core.settings import PathSettings, PlannerSettings, from_argum
 
 from frog_sim.core.hardware_runs import DECISION_TO_FIRING_S
 from frog_twin.core import replay
+from frog_common.state_age import MAX_STATE_AGE_S
+
 # simulated time allowed per replay when --duration is not given
 from frog_twin.core.cases import REPLAY_DURATION_FACTOR, REPLAY_EXTRA_S
 
@@ -42,10 +44,17 @@ def paper_loop_params(args) -> dict:
     """Node parameters of the robot's own loop for ``--paper-cost`` (unless ``--ideal-loop``): the
     planner's asynchronous decisions on mean states, its library search as coded (axes and yaw
     units of the authors' library, ``TransitionModel`` lookup), and the authors' tracker, which
-    gave the raw pose and frame-to-frame velocity differences (with vision)."""
+    gave the raw pose and frame-to-frame velocity differences (with vision). Their loop fired on
+    states up to a replan interval older than the project's loop does, so its replay raises the
+    state-age bound of the planner and the bridge by that interval (only here: a replay of their
+    system, not a setting to run a robot with)."""
     if not args.paper_cost or getattr(args, "ideal_loop", False):
         return {}
-    params = {"planner_node": {"replan_interval": PAPER_REPLAN_INTERVAL_S, "lookup": "authors_code"}}
+    bound = PAPER_REPLAN_INTERVAL_S + MAX_STATE_AGE_S
+    params = {"planner_node": {"replan_interval": PAPER_REPLAN_INTERVAL_S, "lookup": "authors_code",
+                               "max_state_age_s": bound}}
+    if not args.direct:
+        params["bridge_node"] = {"max_state_age_s": bound}
     if not args.no_vision:
         params["tracker_node"] = {"estimator": "frame_difference"}
     return params

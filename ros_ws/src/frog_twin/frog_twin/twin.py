@@ -52,6 +52,7 @@ frog-twin --replay-all DIR --no-vision --direct --seeds 3 --out runs/replay3    
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -59,24 +60,23 @@ import time
 from pathlib import Path
 
 from frog_planner.core.settings import PathSettings, PlannerSettings, add_arguments, from_arguments
-from frog_vision.core.state_filter import FilterSettings
+from frog_common.state_age import MAX_STATE_AGE_S
 from soft_robot_common.graph import GraphError, load_graph
 from soft_robot_common.graph_watch import GraphWatch
-from soft_robot_common.processes import NodeProcess, acquire_domain
+from soft_robot_common.processes import NodeProcess
 from soft_robot_common.tool_signals import stop_on_signals
-from soft_robot_common.supervision import RestartPolicy, Supervisor
 
 from frog_twin.core import twin_report
 from frog_twin.core.cases import PATH_NAMES, path_start_pose, placed_path_settings
 from frog_twin.core.replay import REPLAY_SEEDS
 from frog_twin.core.faults import FaultSpecError, check_against_graph, fault_report, parse_faults
-from frog_twin.core.liveness import DEAF_AFTER_S, WORLD_STALL_S, ClockWatch, DeafWatch, RecorderWatch
 # the realism defaults of the twin (each switchable; see --help)
 from frog_twin.core.realism import (HARDWARE_PERIOD_S, KICK_STRENGTH_SD, LIMB_STRENGTH_SD, YAW_DISTURBANCE_SD,
                                     YAW_DISTURBANCE_TAU_S)
-from frog_twin.core.twin_recording import (read_twin_recording, readable_files, recorded_stamps, recordings,
-                                            run_files)
+from frog_twin.core.twin_recording import (read_pulse_ages, read_twin_recording, readable_files, recorded_stamps,
+                                            recordings, run_files)
 from frog_twin.fault_injection import CHECKED_TOPICS, FaultInjector, RunObserver
+from frog_twin.supervised_run import SupervisedGraph, graph_liveness, parse_budgets, run_domain
 
 def repo_root() -> Path:
     """The repository (for runs/); the current folder when installed elsewhere."""
@@ -180,15 +180,6 @@ VISION_NODES = ("camera_sim", "tracker_node", "image_preview")
 #: not restarted after a crash: the simulated world (a new one would start from the initial pose)
 #: and the robot; the run stops instead
 ESSENTIAL_NODES = ("sim_node", "robot_emulator")
-# A restarted tracker that has no camera model within this is hung (about 1 restart in 10 under
-# load never gets a camera topic, docs/faults.md): the supervisor kills and restarts it again.
-# The timeout holds in real mode too (its own ready pattern: frog_twin.real).
-# A restarted recorder is ready once it has subscribed to the planner's topics (its log says so; the
-# graph still shows a killed recorder's subscriptions until their lease ends): until then it is not
-# deaf (session 31: one under load took 5 s to subscribe and was killed for deaf 3.5 s after).
-RESTART_READY = {"tracker_node": "camera model from camera_info",
-                 "recorder": r"(?s)\A(?=.*recording /frog/primitive \[)(?=.*recording /frog/planner/status \[)"}
-RESTART_READY_TIMEOUT_S = 15.0
 #: The planner starts only once rollout_node serves (transitions simulator): a run started before
 #: made every decision a library fallback while numba compiled the rollouts (about a minute, once).
 ROLLOUTS_READY_S = 600.0
@@ -231,6 +222,8 @@ def twin_graph(args, name: str, out: Path, path_settings, settings, start_pose, 
         overrides["robot_emulator"] = {"link_path": str(out / "robot_tty"), "seed": args.seed,
                                        "command_log": str(out / "robot_commands.csv")}
         overrides["bridge_node"] = {"port": str(out / "robot_tty")}
+    if args.no_vision:          # the simulator's odometry is its own measurement: no tracker state to pair
+        overrides["planner_node"]["state_topic"] = ""
     exclude = (*(VISION_NODES if args.no_vision else ()), *(SERIAL_NODES if args.direct else ()),
                *transitions_choice(args)[1])
     for node, values in getattr(args, "node_params", {}).items():     # --node-param, last
@@ -272,10 +265,11 @@ def twin_report_faults(rep: dict) -> str:
     for pf in rep["per_fault"]:
         rec = "not recovered" if pf["recovery_s"] is None else f"recovered in {pf['recovery_s']:.1f} s"
         lines.append(f"  {pf['fault']}: {rec}")
-    lines.append(f"  limb firings on state older than the bound: {len(rep['stale_firings'])} of {rep['n_firings']}; "
-                 f"messages lost by the recorder while up: {rep['recorder_lost']}"
-                 + (f"; {len(rep['unverified_firings'])} firing(s) unverified (the watch had not matched the "
-                    f"restarted planner yet)" if rep["unverified_firings"] else ""))
+    ages = rep["pulse_ages"]
+    oldest = ages["published"]["max"] if ages["published"] else float("nan")
+    lines.append(f"  pulses on a state older than {rep['state_bound_s']:g} s: {len(rep['stale_pulses'])} of "
+                 f"{ages['pulses']} (oldest {oldest:.3f} s); messages lost by the recorder while up: "
+                 f"{rep['recorder_lost']}")
     if rep["injector_failures"]:
         lines.append("  injector actions refused: " + "; ".join(rep["injector_failures"]))
     return "\n".join(lines)
@@ -297,7 +291,8 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
     ``settings`` (a :class:`PlannerSettings`) replace them (the hardware replay), and
     ``duration`` [s simulated] replaces ``args.duration``. ``faults``
     (:class:`frog_twin.core.faults.Fault`) are injected during the run; a crashed node is
-    restarted with back-off (the world, sim_node, and the robot are not: the run stops).
+    restarted with back-off (the world, sim_node, and the robot are not: the run stops), and
+    the graph file's liveness contracts restart a deaf node or stop the run with a reason.
     """
     out.mkdir(parents=True, exist_ok=True)
     earlier = recordings(out / "recording")
@@ -312,100 +307,34 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
         check_against_graph(faults, graph.names())
         if any(f.kind == "unplug" for f in faults):     # the injector plugs back in (~/replug)
             graph["robot_emulator"].parameters["unplug_duration_s"] = 0.0
-    domain = acquire_domain()
+    liveness = graph_liveness(GRAPH_FILE, "sim", graph.names(), getattr(args, "budgets", None))
+    domain = run_domain(getattr(args, "domain", None))
     watch = PlannerWatch(domain)
-    deaf = DeafWatch(args.deaf_tracker_after) if args.deaf_tracker_after > 0 else None
-    world = ClockWatch(args.world_stall_after) if args.world_stall_after > 0 else None
-    recorder_watch = (RecorderWatch(CHECKED_TOPICS, args.deaf_recorder_after)
-                      if args.deaf_recorder_after > 0 and "recorder" in graph.names() else None)
-    observer = RunObserver(watch.node, deaf, recorder_watch)
-    supervisor = Supervisor(RestartPolicy(), essential=ESSENTIAL_NODES, log=lambda s: print("  " + s, flush=True),
-                            on_restart=lambda name, proc: observer.node_restarted(name))
+    run = SupervisedGraph(graph, liveness, domain.env, out, lambda node: _restarter(node, domain, out, watch),
+                          lambda: observer.sim_now, essential=ESSENTIAL_NODES,
+                          log=lambda s: print("  " + s, flush=True),
+                          on_restart=lambda n: observer.node_restarted(n))
+    observer = RunObserver(watch.node, run.monitor)
     injector = None
-    stop_reason = None
-    goal = False
     try:
-        for node in graph:
-            supervisor.add(node.name, node.start(domain.env, out), _restarter(node, domain, out, watch),
-                           ready=RESTART_READY.get(node.name), ready_timeout_s=RESTART_READY_TIMEOUT_S)
-            if node.name == "robot_emulator":
-                link = Path(node.parameters["link_path"])
-                watch.wait(lambda: link.exists(), 60, "the robot emulator's serial device", supervisor.processes())
-        watch.wait(lambda: watch.odom_count >= 5, 120, "odometry on /frog/odom (camera + tracker running)",
-                   supervisor.processes())
-        if "rollout_node" in supervisor.names():       # compiled on first use: minutes on a fresh clone
-            watch.wait(lambda: "ready in" in supervisor.process("rollout_node").log_text(), ROLLOUTS_READY_S,
-                       "rollout_node ready (the rollouts are compiled on first use)", supervisor.processes())
-        # the metrics start at the planner's first decision: the recorder must hear it
-        recorded = ("/frog/sim/odom", *PLANNER_TOPICS)     # (no bridge topics with --direct)
-        watch.wait(lambda: watch.subscribed("recorder", recorded), 60,
-                   f"the recorder subscribed to {', '.join(recorded)}", supervisor.processes())
-        watch.wait(lambda: observer.sim_now is not None, 30, "/clock", supervisor.processes())
-        # the idle planner publishes I every period: once the watch has one, it hears every decision
-        watch.wait(lambda: observer.obs.decisions, 60, "the idle planner's primitive I on /frog/primitive",
-                   supervisor.processes())
-        watch.start_planner()
-        sim_start = observer.sim_now
-        injector = FaultInjector(watch.node, faults, supervisor, log=lambda s: print("  " + s, flush=True))
+        sim_start = _start_twin(run, watch, observer, graph)
+        injector = FaultInjector(watch.node, faults, run.supervisor, log=lambda s: print("  " + s, flush=True))
         limit = duration or args.duration
-        t_start = time.monotonic()
         print(f"  {name}: following (at most {limit:.0f} s simulated, real-time factor {args.real_time_factor:g})"
               + (f"; faults: {'; '.join(f.label() for f in faults)}" if faults else ""), flush=True)
-        last_following = sim_start
-        while True:
-            watch.spin(0.2)
-            sim_t = observer.sim_now - sim_start
-            injector.tick(sim_t, observer.sim_now)
-            stop_reason = supervisor.poll()
-            if stop_reason:
-                break
-            if deaf is not None:
-                _check_tracker_hears(deaf, supervisor, injector)
-            if recorder_watch is not None:
-                _check_recorder_records(recorder_watch, observer, supervisor, injector,
-                                        watch.subscribed("recorder", PLANNER_TOPICS))
-            if world is not None:
-                stalled = world.stalled_for(time.monotonic(), observer.sim_now,
-                                            injector.clock_paused or "sim_node" in injector.held)
-                if stalled is not None:     # before a starved restarted tracker is taken for hung
-                    stop_reason = (f"the simulated world stalled: /clock has not advanced for {stalled:.0f} s "
-                                   f"(wall) with nothing pausing it (sim_node blocked?)")
-                    break
-            observer.watch_recorder("recorder" in supervisor.names() and not supervisor.down("recorder")
-                                    and watch.subscribed("recorder", PLANNER_TOPICS),
-                                    ready="recorder" not in supervisor.recovering())
-            observer.watch_recorder_subscriptions()
-            if watch.state == watch.Status.STATE_GOAL_REACHED:
-                goal = True
-                break
-            # the stuck timeout counts from the end of a restart (a hung tracker takes 15 s to be
-            # found and restarted again: the run must not stop while the supervisor recovers it)
-            if watch.state == watch.Status.STATE_FOLLOWING or supervisor.recovering():
-                last_following = observer.sim_now
-            if observer.emergency:
-                stop_reason = f"the robot reported an emergency (bridge: {observer.emergency})"
-                break
-            if observer.sim_now - last_following > args.stuck_timeout:
-                stop_reason = (f"the planner has not followed for {args.stuck_timeout:g} s simulated: "
-                               f"{watch.last.message if watch.last is not None else 'no status'}")
-                break
-            if sim_t > limit:
-                stop_reason = f"time limit ({limit:g} s simulated)"
-                break
-            if time.monotonic() - t_start > 10 * limit / args.real_time_factor + 60:
-                raise RuntimeError(f"{name}: the twin made too little progress in wall time (machine overloaded?)")
+        stop_reason, goal, wall = _follow(run, watch, observer, injector, sim_start, limit, args.real_time_factor,
+                                          name)
         # the run ends here (the time limit exactly): the world runs on while the nodes stop
         run_end = sim_start + limit if stop_reason and stop_reason.startswith("time limit") else observer.sim_now
         if stop_reason and not stop_reason.startswith("time limit"):
             print(f"  {name}: stopping: {stop_reason}", flush=True)
             watch.publish_stop()
         watch.spin(1.0)
-        observer.close_recorder_interval("recorder" in supervisor.names() and not supervisor.down("recorder"))
-        wall = time.monotonic() - t_start
+        observer.close_recorder_interval("recorder" in run.supervisor.names() and not run.supervisor.down("recorder"))
     finally:
         if injector is not None:
             injector.finish()
-        supervisor.stop_all()
+        run.supervisor.stop_all()
         watch.close()
         domain.release()
     files = run_files(out / "recording", earlier)     # not an earlier run's files in the same folder
@@ -414,30 +343,24 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
     files = readable_files(files, out / "recovered")    # a killed recorder's file, recovered
     rec = read_twin_recording(files)
     metrics = twin_report.run_metrics(rec, name, end_time=run_end)
-    metrics["wall_time_s"] = wall
-    metrics["goal_reached"] = goal
-    metrics["stop_reason"] = None if goal else stop_reason
-    metrics["supervision"] = supervisor.summary()
-    metrics["unclean_stops"] = supervisor.unclean_stops()
+    metrics.update(wall_time_s=wall, goal_reached=goal, stop_reason=None if goal else stop_reason,
+                   supervision=run.supervisor.summary(), liveness_verdicts=run.verdicts,
+                   unclean_stops=run.supervisor.unclean_stops())
+    # the design's bound, not the run's: a run that raises its nodes' bound is audited against it too
+    ages = read_pulse_ages(files, MAX_STATE_AGE_S)
+    metrics["pulse_ages"] = ages.summary()
     if faults:
-        bridge = graph["bridge_node"].parameters if "bridge_node" in graph else {}
-        metrics["faults"] = fault_report(
-            faults, observer, sim_start, injector, recorded_stamps(files, CHECKED_TOPICS),
-            # the design's bounds, not the run's (a sabotaged planner or tracker must not move
-            # them): planner_node's stale bound (2 periods) on the estimate's stamp, + how long
-            # the tracker predicts without a detection (its estimate at a stamp then holds
-            # information from up to coast_timeout earlier), + the camera-to-planner latency
-            pose_bound=2.0 * settings.period + (FilterSettings.coast_timeout if not args.no_vision else 0.0) + 0.2,
-            command_bound=float(bridge.get("max_command_age_s", 0.5)) + 0.2, goal=goal,
-            stop_reason=stop_reason, unclean=metrics["unclean_stops"], recorded_odom=rec.tracked[:, 0].tolist(),
-            recorded_decisions=rec.primitives, recorded_pose_ages=rec.status[:, [0, 9]].tolist())
+        metrics["faults"] = fault_report(faults, observer, sim_start, injector,
+                                         recorded_stamps(files, CHECKED_TOPICS), ages, goal, stop_reason,
+                                         metrics["unclean_stops"])
     metrics["recording"] = [str(f) for f in files]
     metrics["settings"] = {"planner": settings.as_dict(), "path": path_settings.as_dict(),
                            "start_pose": [x0, y0, h0], "real_time_factor": args.real_time_factor,
                            "seed": args.seed, "vision": not args.no_vision, "serial": not args.direct,
                            "limb_strength_sd": args.limb_strength_sd, "kick_strength_sd": args.kick_strength_sd,
                            "yaw_disturbance_sd": args.yaw_disturbance_sd,
-                           "yaw_disturbance_tau_s": args.yaw_disturbance_tau}
+                           "yaw_disturbance_tau_s": args.yaw_disturbance_tau,
+                           "liveness_budgets": dataclasses.asdict(liveness.budgets)}
     metrics["feasibility"] = twin_report.feasibility(args.library, settings, rec.path, path_settings.goal_tolerance)
     w = settings.weights
     twin_report.plot_run(rec, metrics, out.parent / f"{name}.png", weights=(w.distance, w.heading, w.progress))
@@ -449,39 +372,56 @@ def run_twin(args, name: str, out: Path, path_settings=None, start_pose=None, se
     return rec, metrics
 
 
-def _check_tracker_hears(deaf: DeafWatch, supervisor: Supervisor, injector: FaultInjector) -> None:
-    """Kill a running tracker that receives no frame while the camera publishes (frog_twin.core.liveness);
-    the supervisor restarts it. Its silence is excused while it, or the camera, is down or held."""
-    names = supervisor.names()
-    if "tracker_node" not in names or "camera_sim" not in names:
-        return
-    excused = (supervisor.down("tracker_node") or supervisor.down("camera_sim") or bool(supervisor.recovering())
-               or bool(injector.held & {"tracker_node", "camera_sim"}))
-    silent = deaf.deaf_for(time.monotonic(), excused)
-    if silent is not None:
-        supervisor.kill_hung("tracker_node", f"deaf: no camera frame received for {silent:.1f} s while camera_sim "
-                                             f"published {deaf.published}")
-        deaf.restart(time.monotonic())
+def _start_twin(run: SupervisedGraph, watch, observer, graph) -> float:
+    """Start the graph and wait until the loop runs; the simulated time the planner started at."""
+    def device(node):
+        if node.name == "robot_emulator":
+            link = Path(node.parameters["link_path"])
+            watch.wait(lambda: link.exists(), 60, "the robot emulator's serial device", run.supervisor.processes())
+    run.start(device)
+    procs = run.supervisor.processes()
+    watch.wait(lambda: watch.odom_count >= 5, 120, "odometry on /frog/odom (camera + tracker running)", procs)
+    if "rollout_node" in run.supervisor.names():       # compiled on first use: minutes on a fresh clone
+        watch.wait(lambda: run.monitor.ready("rollout_node"), ROLLOUTS_READY_S,
+                   "rollout_node ready (the rollouts are compiled on first use)", procs)
+    # the metrics start at the planner's first decision: the recorder must hear it
+    recorded = ("/frog/sim/odom", *PLANNER_TOPICS)     # (no bridge topics with --direct)
+    watch.wait(lambda: watch.subscribed("recorder", recorded), 60,
+               f"the recorder subscribed to {', '.join(recorded)}", procs)
+    watch.wait(lambda: observer.sim_now is not None, 30, "/clock", procs)
+    # the idle planner publishes I every period: once the watch has one, it hears every decision
+    watch.wait(lambda: observer.obs.decisions, 60, "the idle planner's primitive I on /frog/primitive", procs)
+    watch.start_planner()
+    run.monitor.restart(time.monotonic(), observer.sim_now)      # the start-up does not count as silence
+    return observer.sim_now
 
 
-def _check_recorder_records(rw: RecorderWatch, observer: RunObserver, supervisor: Supervisor,
-                            injector: FaultInjector, subscribed: bool) -> None:
-    """Kill a running recorder that records nothing on a checked topic while this node sees it
-    published (frog_twin.core.liveness); the supervisor restarts it into a new file. Excused while
-    it or any node is down or restarting, it is SIGSTOPped by the injector, or not yet subscribed
-    (on one topic: a restarted recorder with no new subscription to it in the graph)."""
-    now = time.monotonic()
-    rw.published(now, observer.seen_counts())
-    # a restarted publisher is matched by each subscriber after its own discovery: excused too
-    excused = supervisor.down("recorder") or bool(supervisor.recovering()) or "recorder" in injector.held \
-        or not subscribed
-    deaf = rw.deaf_for(now, excused, excused_topics=observer.resubscription.waiting)
-    if deaf is not None:
-        topic, silent, published = deaf
-        observer.recorder_went_deaf(topic, rw.heard_at[topic])
-        supervisor.kill_hung("recorder", f"deaf: nothing recorded on {topic} for {silent:.1f} s while "
-                                         f"{published} were published")
-        rw.restart(time.monotonic())
+def _follow(run: SupervisedGraph, watch, observer, injector, sim_start: float, limit: float, rtf: float,
+            name: str):
+    """Poll the run until it ends: (stop reason or None, goal reached, wall seconds)."""
+    t_start = time.monotonic()
+
+    def verdict(v):
+        if v.node == "recorder" and v.action == "restart":     # what it missed is not a loss while up
+            observer.recorder_went_deaf(run.edge_topic(v.rule), v.since_sim)
+
+    while True:
+        watch.spin(0.2)
+        injector.tick(observer.sim_now - sim_start, observer.sim_now)
+        held = set(injector.held) | ({"sim_node"} if injector.clock_paused else set())
+        reason = run.poll(held, verdict)
+        if reason:
+            return reason, False, time.monotonic() - t_start
+        recorder_up = "recorder" in run.supervisor.names() and not run.supervisor.down("recorder")
+        observer.watch_recorder(recorder_up and watch.subscribed("recorder", PLANNER_TOPICS),
+                                ready=run.monitor.ready("recorder"))
+        observer.watch_recorder_subscriptions()
+        if watch.state == watch.Status.STATE_GOAL_REACHED:
+            return None, True, time.monotonic() - t_start
+        if observer.sim_now - sim_start > limit:
+            return f"time limit ({limit:g} s simulated)", False, time.monotonic() - t_start
+        if time.monotonic() - t_start > 10 * limit / rtf + 60:
+            raise RuntimeError(f"{name}: the twin made too little progress in wall time (machine overloaded?)")
 
 
 def _projector(rec):
@@ -512,8 +452,15 @@ def _prepare_real(ap, args):
                    (args.tag_offset, "--tag-offset")):
         if f is not None and not f.is_file():
             ap.error(f"{opt} {f} does not exist")
-    if not (args.camera_fps > 0 and args.start_tolerance > 0 and args.tag_lost_timeout > 0):
-        ap.error("--camera-fps, --start-tolerance and --tag-lost-timeout must be > 0")
+    if not (args.camera_fps > 0 and args.start_tolerance > 0):
+        ap.error("--camera-fps and --start-tolerance must be > 0")
+    try:
+        args.budgets = parse_budgets(args.budget)
+        if args.tag_lost_timeout is not None:
+            args.budgets["tag_lost_after_s"] = args.tag_lost_timeout
+        graph_liveness(GRAPH_FILE, "real", (), args.budgets)        # checks names, values and their order
+    except ValueError as exc:
+        ap.error(str(exc))
     args.tag_offset_params = None
     if args.tag_offset is not None:
         from frog_vision.core.tag_offset import read_tag_offset
@@ -695,9 +642,8 @@ def _main(argv=None) -> int:
                     help="run sim_node beside the robot as a reference prediction (from the tracked start pose, "
                          "executing the planner's primitives; never in the loop)")
     rr.add_argument("--preflight-timeout", type=float, default=20.0, help="longest wait of each pre-flight check [s]")
-    rr.add_argument("--domain", type=int, default=None,
-                    help="ROS domain id of the real run (default: one no other run on this machine holds)")
-    rr.add_argument("--tag-lost-timeout", type=float, default=3.0, help="stop when no tag pose for this long [s]")
+    rr.add_argument("--tag-lost-timeout", type=float, default=None,
+                    help="stop when the tag is not seen for this long [s] (the budget tag_lost_after_s, default 3)")
     gg = ap.add_argument_group("the graph (frog_twin/config/frog_graph.yaml)")
     gg.add_argument("--print-graph", action="store_true",
                     help="print the equivalent 'ros2 run' command lines of --mode and exit (nothing is started)")
@@ -728,23 +674,15 @@ def _main(argv=None) -> int:
                          "1 = 0.45")
     ap.add_argument("--node-param", action="append", default=[], metavar="NODE:NAME=VALUE",
                     help="set a node's parameter for this run (YAML value; repeatable), e.g. "
-                         "--node-param tracker_node:frozen_frames=5 --node-param planner_node:stale_periods=3")
-    fg.add_argument("--deaf-tracker-after", type=float, default=DEAF_AFTER_S, metavar="S",
-                    help="kill and restart a running tracker_node that has received no camera frame for this long "
-                         "[s wall] while camera_sim published (a live but deaf subscriber, docs/faults.md); "
-                         f"0 = off (default {DEAF_AFTER_S:g})")
-    fg.add_argument("--deaf-recorder-after", type=float, default=DEAF_AFTER_S, metavar="S",
-                    help="kill and restart a running recorder that has recorded nothing on a checked topic "
-                         f"({', '.join(CHECKED_TOPICS)}) for this long [s wall] while the twin saw it published "
-                         "(docs/faults.md); "
-                         f"0 = off (default {DEAF_AFTER_S:g})")
-    fg.add_argument("--world-stall-after", type=float, default=WORLD_STALL_S, metavar="S",
-                    help="stop the run when /clock has not advanced for this long [s wall] while no fault pauses "
-                         "it (a simulator blocked in the middleware, docs/faults.md); 0 = off "
-                         f"(default {WORLD_STALL_S:g})")
-    fg.add_argument("--stuck-timeout", type=float, default=20.0,
-                    help="stop the run cleanly when the planner has not followed for this long [s simulated], "
-                         "counted from the end of a node's restart")
+                         "--node-param tracker_node:frozen_frames=5 --node-param planner_node:max_state_age_s=0.4")
+    ap.add_argument("--domain", type=int, default=None, choices=range(0, 233), metavar="ID",
+                    help="ROS domain id of the run, to watch it with ros2 topic echo (default: one no other run on "
+                         "this machine holds)")
+    ap.add_argument("--budget", action="append", default=[], metavar="NAME=SECONDS",
+                    help="replace a liveness budget of the graph file for this run (repeatable; their order is "
+                         "checked), e.g. --budget deaf_after_s=6 --budget stuck_after_s=30: restart_backoff_s, "
+                         "restart_backoff_max_s, max_restarts, restart_grace_s, deaf_after_s (0 = off), "
+                         "world_stall_s (0 = off), stuck_after_s, tag_lost_after_s")
     add_arguments(ap, PlannerSettings)
     add_arguments(ap, PathSettings, exclude=("path_type", "path_start_x", "path_start_y", "path_heading",
                                              "waypoint_file"))
@@ -790,16 +728,10 @@ def _main(argv=None) -> int:
             ap.error("--paper-cost, --tag-offset-deg, --aligned-tag and --ideal-loop go with --replay / --replay-all, "
                      "--seeds "
                      "also with --fault-campaign")
-    if not args.deaf_tracker_after >= 0:
-        ap.error("--deaf-tracker-after must be >= 0 (0 = off)")
-    if not args.deaf_recorder_after >= 0:
-        ap.error("--deaf-recorder-after must be >= 0 (0 = off)")
-    if not args.world_stall_after >= 0:
-        ap.error("--world-stall-after must be >= 0 (0 = off)")
-    if not args.stuck_timeout > 0:
-        ap.error("--stuck-timeout must be > 0")
     try:
         args.node_params = parse_node_params(args.node_param)
+        args.budgets = parse_budgets(args.budget)
+        graph_liveness(GRAPH_FILE, "sim", (), args.budgets)         # checks names, values and their order
     except ValueError as exc:
         ap.error(str(exc))
     args.fault_list = ()

@@ -11,7 +11,7 @@ def _fake_runs(monkeypatch, calls, fail_label=None):
         calls.append(label)
         if label == fail_label:
             raise RuntimeError("the twin broke")
-        return {"faults": {"outcome": "completed", "stop_reason": None, "stale_firings": [], "recorder_lost": 0,
+        return {"faults": {"outcome": "completed", "stop_reason": None, "stale_pulses": [], "recorder_lost": 0,
                            "per_fault": [{"fault": f.label(), "recovery_s": 1.5} for f in faults]}}
     monkeypatch.setattr(twin, "run_path", run_path)
 
@@ -73,7 +73,7 @@ def test_a_stopped_campaign_writes_the_table_of_what_is_done(tmp_path, monkeypat
         calls.append(out.parent.name)
         if len(calls) == 3:
             raise KeyboardInterrupt("SIGTERM")       # the twin's stop-signal handler
-        return {"faults": {"outcome": "stopped", "stop_reason": "x", "stale_firings": [], "recorder_lost": 0,
+        return {"faults": {"outcome": "stopped", "stop_reason": "x", "stale_pulses": [], "recorder_lost": 0,
                            "per_fault": [{"fault": f.label(), "recovery_s": None} for f in faults]}}
     monkeypatch.setattr(twin, "run_path", run_path)
     assert _campaign(tmp_path) == 130

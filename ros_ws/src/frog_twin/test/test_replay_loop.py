@@ -1,20 +1,24 @@
 """The robot's own loop for --paper-cost replays: which node parameters, and --node-param wins."""
 import argparse
 
+from frog_common.state_age import MAX_STATE_AGE_S
 from frog_twin.replay_cli import PAPER_REPLAN_INTERVAL_S, _merged, paper_loop_params
 
 
 def _args(**kw):
-    base = {"paper_cost": True, "ideal_loop": False, "no_vision": False}
+    base = {"paper_cost": True, "ideal_loop": False, "no_vision": False, "direct": False}
     base.update(kw)
     return argparse.Namespace(**base)
 
 
 def test_paper_cost_runs_the_robots_loop_unless_ideal():
-    planner = {"replan_interval": PAPER_REPLAN_INTERVAL_S, "lookup": "authors_code"}
-    assert paper_loop_params(_args()) == {"planner_node": planner, "tracker_node": {"estimator": "frame_difference"}}
-    # without vision there is no tracker: the planner's loop alone
-    assert paper_loop_params(_args(no_vision=True)) == {"planner_node": planner}
+    # their loop fires on states up to one replan interval older: the bound grows by it, in both hops
+    bound = PAPER_REPLAN_INTERVAL_S + MAX_STATE_AGE_S
+    planner = {"replan_interval": PAPER_REPLAN_INTERVAL_S, "lookup": "authors_code", "max_state_age_s": bound}
+    assert paper_loop_params(_args()) == {"planner_node": planner, "tracker_node": {"estimator": "frame_difference"},
+                                          "bridge_node": {"max_state_age_s": bound}}
+    # without vision there is no tracker, without the link no bridge: the planner's loop alone
+    assert paper_loop_params(_args(no_vision=True, direct=True)) == {"planner_node": planner}
     assert paper_loop_params(_args(ideal_loop=True)) == {}
     assert paper_loop_params(_args(paper_cost=False)) == {}
     # 9 polled states at the ~14 fps each consumer of the authors' tracker got (hardware_runs README)
@@ -25,6 +29,7 @@ def test_user_node_params_override_the_loop_and_inputs_stay_unchanged():
     loop = paper_loop_params(_args())
     user = {"planner_node": {"replan_interval": 0.0, "depth": 2}, "camera_sim": {"fps": 14.0}}
     out = _merged(loop, user)
-    assert out["planner_node"] == {"replan_interval": 0.0, "depth": 2, "lookup": "authors_code"}
+    assert out["planner_node"] == {"replan_interval": 0.0, "depth": 2, "lookup": "authors_code",
+                                   "max_state_age_s": PAPER_REPLAN_INTERVAL_S + MAX_STATE_AGE_S}
     assert out["tracker_node"] == {"estimator": "frame_difference"} and out["camera_sim"] == {"fps": 14.0}
     assert loop["planner_node"]["replan_interval"] == PAPER_REPLAN_INTERVAL_S      # not mutated

@@ -7,8 +7,9 @@ still ticks, and reports in the log and on ``diagnostics``.
 
 from __future__ import annotations
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
+
+from .diagnostics import WARN, NodeDiagnostics
 
 
 class SimClockWatch:
@@ -21,7 +22,10 @@ class SimClockWatch:
         self.last_ros_ns = node.get_clock().now().nanoseconds
         self.last_change = self.steady.now()
         self.state = "starting"      # starting -> ok | missing | stalled
-        self.pub = node.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.message, self.waited = "", 0.0
+        self.diagnostics = NodeDiagnostics(node, "clock", lambda: (WARN, self.message, {
+            "seconds_without_clock": f"{self.waited:.1f}"}), hardware_id=node.get_fully_qualified_name(),
+            period_s=None, stamp=self._stamp)
         self.timer = node.create_timer(period_s, self.check, clock=self.steady)
 
     @staticmethod
@@ -48,13 +52,8 @@ class SimClockWatch:
                    "use_sim_time is true and /clock has not advanced for %.0f s (simulator paused or gone)" % waited)
         if state != self.state:
             self.node.get_logger().warn(message)
-        self.state = state
-        self.publish(DiagnosticStatus.WARN, message, waited)
+        self.state, self.message, self.waited = state, message, waited
+        self.diagnostics.publish()
 
-    def publish(self, level, message: str, waited: float) -> None:
-        msg = DiagnosticArray()
-        msg.header.stamp = self.steady.now().to_msg() if self.last_ros_ns == 0 else self.node.get_clock().now().to_msg()
-        msg.status = [DiagnosticStatus(level=level, name=f"{self.node.get_name()}: clock",
-                                       hardware_id=self.node.get_fully_qualified_name(), message=message,
-                                       values=[KeyValue(key="seconds_without_clock", value=f"{waited:.1f}")])]
-        self.pub.publish(msg)
+    def _stamp(self):
+        return self.steady.now().to_msg() if self.last_ros_ns == 0 else self.node.get_clock().now().to_msg()

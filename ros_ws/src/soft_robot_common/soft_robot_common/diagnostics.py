@@ -3,13 +3,18 @@
 ``NodeDiagnostics(node, "serial link", report)`` publishes one DiagnosticStatus named
 ``"<node name>: serial link"`` whose level, message and values come from ``report()``,
 which returns ``(level, message, {key: value})`` with ``level`` one of :data:`OK`,
-:data:`WARN`, :data:`ERROR`. The message says what the node waits for when it is not OK.
-The timer runs on the steady clock (a node on ``/clock`` still reports when simulated time
-stops); the stamp is the node's clock.
+:data:`WARN`, :data:`ERROR`. The message says what the node waits for when it is not OK;
+it is for people. Programs read the values, whose keys are typed: a node that can be at
+work or not yet (a camera model still missing, a link not open) says so in ``ready``
+(``true``/``false``), and every status carries the node's ``pid``, so a supervisor tells a
+restarted process's word from its predecessor's. The timer runs on the steady clock (a node
+on ``/clock`` still reports when simulated time stops); the stamp is the node's clock.
+:meth:`NodeDiagnostics.publish` also says a change at once, between the ticks.
 """
 
 from __future__ import annotations
 
+import os
 from typing import Callable
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -22,23 +27,36 @@ class NodeDiagnostics:
     """Publishes ``report()`` on the node's relative ``diagnostics`` topic every ``period_s``."""
 
     def __init__(self, node, what: str, report: Callable[[], tuple], hardware_id: str = "",
-                 period_s: float = 1.0):
+                 period_s: float | None = 1.0, stamp: Callable[[], object] | None = None):
         self.node = node
+        self.stamp = stamp or (lambda: node.get_clock().now().to_msg())    # a simulator stamps with its world
         self.what = what
         self.report = report
         self.hardware_id = hardware_id or node.get_name()
         self.pub = node.create_publisher(DiagnosticArray, "diagnostics", 10)
-        self.timer = node.create_timer(period_s, self.publish, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.timer = None if period_s is None else node.create_timer(      # None: on publish() only
+            period_s, self.publish, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def publish(self) -> None:
         try:
             level, message, values = self.report()
         except Exception as exc:       # a report must never take the node down
             level, message, values = ERROR, f"diagnostics failed: {exc!r}", {}
+        if isinstance(level, int):      # a core's plain 0/1/2 (OK/WARN/ERROR)
+            level = bytes([level])
         status = DiagnosticStatus(name=f"{self.node.get_name()}: {self.what}", hardware_id=self.hardware_id,
                                   level=level, message=message)
-        status.values = [KeyValue(key=str(k), value=f"{v:.3g}" if isinstance(v, float) else str(v))
-                         for k, v in values.items()]
+        values = {**values, "pid": os.getpid()}
+        status.values = [KeyValue(key=str(k), value=_text(v)) for k, v in values.items()]
         msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.header.stamp = self.stamp()
         self.pub.publish(msg)
+
+
+def _text(value) -> str:
+    """A diagnostics value as text: floats to 3 significant digits, booleans as true/false."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, float):
+        return f"{value:.3g}"
+    return str(value)

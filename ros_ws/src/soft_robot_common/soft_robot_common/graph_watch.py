@@ -117,6 +117,27 @@ class GraphWatch:
         finally:
             self.node.destroy_subscription(sub)
 
+    def wait_ready(self, node_name: str, pid: int | None = None, keys=("ready",), timeout: float = 60.0,
+                   procs: Iterable = ()) -> float:
+        """Wait until node ``node_name`` (process ``pid``, if given) says in its ``/diagnostics`` that it
+        works: every key of ``keys`` present and not ``false`` (NodeDiagnostics' typed values)."""
+        from diagnostic_msgs.msg import DiagnosticArray
+        seen = []
+
+        def on_diag(msg):
+            for st in msg.status:
+                if st.name.split(":", 1)[0] != node_name:
+                    continue
+                values = {kv.key: kv.value for kv in st.values}
+                if (pid is None or values.get("pid") == str(pid)) and all(
+                        values.get(k, "false") not in ("false", "") for k in keys):
+                    seen.append(True)
+        sub = self.node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
+        try:
+            return self.spin_until(lambda: seen, timeout, f"{node_name} ready (its diagnostics)", procs)
+        finally:
+            self.node.destroy_subscription(sub)
+
     # -- services -------------------------------------------------------------------------
     def wait_for_service(self, client, timeout: float = 15.0) -> float:
         return self.spin_until(client.service_is_ready, timeout, f"service {client.srv_name}")
@@ -146,6 +167,8 @@ class GraphWatch:
         return next(f for f in futures if f.done()).result()
 
     def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self._rclpy.shutdown(context=self.context)
+        """Destroy the node and its context (again: nothing)."""
+        if self.context.ok():
+            self.executor.shutdown()
+            self.node.destroy_node()
+            self._rclpy.shutdown(context=self.context)

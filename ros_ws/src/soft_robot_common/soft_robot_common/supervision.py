@@ -5,18 +5,18 @@ again with the same command line after a back-off that doubles per restart of th
 (``backoff_s``, ``2 backoff_s``, ... up to ``backoff_max_s``), at most ``max_restarts``
 times. Nodes named in ``essential`` are not restarted (the simulated world: a new one would
 start from the initial pose); their exit, or a node out of restarts, ends the run with the
-reason in :attr:`Supervisor.stop_reason`. A node may also have a readiness check (a pattern
-its log must show within ``ready_timeout_s`` of each restart): a restarted process that is
-running but never gets ready (a middleware hang, docs/faults.md) is SIGKILLed and handled as
-a crash, as is one the caller finds hung by its own check
-(:meth:`Supervisor.kill_hung`). The first start is the caller's to wait for.
+reason in :attr:`Supervisor.stop_reason`. A node may also have a readiness check (a predicate
+of its process, true once the node says it works: its typed diagnostics, a service), which each
+restart must pass within ``ready_timeout_s``: a restarted process that is running but never gets
+ready (a middleware hang, docs/faults.md) is SIGKILLed and handled as a crash, as is one the
+caller finds hung by its own check (:meth:`Supervisor.kill_hung`). The first start is the
+caller's to wait for.
 Every exit and restart is an event with its time, printed and kept for the run's report.
 Pure Python (no rclpy).
 """
 
 from __future__ import annotations
 
-import re
 import signal
 import time
 from dataclasses import dataclass, field
@@ -83,7 +83,7 @@ class _Slot:
     released: bool = False                    # its exit was meant (release)
     ended_run: bool = False                   # its exit (crash or hang, not restarted) is the stop reason
     history: list = field(default_factory=list)   # every process this slot ran
-    ready: Optional[re.Pattern] = None        # its log shows this once the node works
+    ready: Optional[Callable[[NodeProcess], bool]] = None     # true once the process's node works
     ready_timeout_s: float = 0.0
     ready_seen: bool = False
 
@@ -102,15 +102,15 @@ class Supervisor:
         self._slots: dict[str, _Slot] = {}
 
     def add(self, name: str, process: NodeProcess, start: Callable[[str], NodeProcess],
-            ready: Optional[str] = None, ready_timeout_s: float = 30.0) -> None:
+            ready: Optional[Callable[[NodeProcess], bool]] = None, ready_timeout_s: float = 30.0) -> None:
         """Supervise ``process`` of node ``name``; ``start(label)`` starts it again (log ``<label>.log``).
 
-        ``ready``: a regex the log of each restarted process must match within ``ready_timeout_s``,
-        or the process is taken for hung: SIGKILLed, then restarted (or given up) like a crash."""
+        ``ready(process)``: true once a restarted process works; one that is not ready within
+        ``ready_timeout_s`` is taken for hung: SIGKILLed, then restarted (or given up) like a crash."""
         if ready is not None and not ready_timeout_s > 0:
             raise ValueError(f"ready_timeout_s {ready_timeout_s!r} must be > 0")
-        self._slots[name] = _Slot(name, start, process, history=[process],
-                                  ready=re.compile(ready) if ready else None, ready_timeout_s=ready_timeout_s)
+        self._slots[name] = _Slot(name, start, process, history=[process], ready=ready,
+                                  ready_timeout_s=ready_timeout_s)
 
     def process(self, name: str) -> NodeProcess:
         return self._slots[name].process
@@ -143,6 +143,10 @@ class Supervisor:
     def down(self, name: str) -> bool:
         """Whether node ``name`` is not running now (crashed, waiting for its restart)."""
         return not self._slots[name].process.running()
+
+    def released(self, name: str) -> bool:
+        """Whether node ``name``'s exit was meant (:meth:`release`): it is not coming back."""
+        return self._slots[name].released
 
     def _event(self, node: str, what: str, code=None, detail: str = "") -> None:
         ev = SupervisionEvent(time.monotonic(), node, what, code, detail)
@@ -184,12 +188,11 @@ class Supervisor:
         return self.stop_reason
 
     def _check_ready(self, slot: _Slot, now: float) -> None:
-        """Kill a process that has not logged its readiness pattern in time (poll() then restarts it)."""
-        if slot.ready.search(slot.process.log_text()):
+        """Kill a process that has not got ready in time (poll() then restarts it)."""
+        if slot.ready(slot.process):
             slot.ready_seen = True
         elif now - slot.process.started_at > slot.ready_timeout_s:
-            self.kill_hung(slot.name, f"no {slot.ready.pattern!r} in its log within "
-                           f"{slot.ready_timeout_s:g} s of its start")
+            self.kill_hung(slot.name, f"not ready within {slot.ready_timeout_s:g} s of its start")
 
     def kill_hung(self, name: str, why: str) -> None:
         """SIGKILL node ``name``, running but not working (``why``); poll() then restarts it like a crash."""

@@ -93,18 +93,23 @@ def test_policy_rejects_nonsense():
     assert RestartPolicy(backoff_s=1.0, backoff_max_s=3.0).delay(5) == 3.0
 
 
+def _ready(folder, process) -> bool:
+    """The test processes' typed readiness: a file named after the process."""
+    return (folder / f"{process.name}.ready").exists()
+
+
 def test_a_node_that_never_gets_ready_is_killed_and_restarted(tmp_path):
-    """A restarted process whose log never shows the readiness pattern counts as hung: SIGKILL,
+    """A restarted process that never says it is ready counts as hung: SIGKILL,
     then the normal restart; a restart that does get ready is left alone past the timeout.
     The first start is not checked (the caller waits for it)."""
     starts = []
 
-    def start(label):       # the first restart hangs, the second works
-        cmd = "exec sleep 60" if not starts else "echo camera model from camera_info; exec sleep 60"
+    def start(label):       # the first restart hangs, the second works (it writes its ready file)
+        cmd = "exec sleep 60" if not starts else f"touch {tmp_path / label}.ready; exec sleep 60"
         starts.append(label)
         return NodeProcess(["sh", "-c", cmd], dict(os.environ), tmp_path / f"{label}.log", label)
     sup = Supervisor(RestartPolicy(max_restarts=2, backoff_s=0.0), log=lambda s: None)
-    sup.add("tracker", _sleeper(tmp_path, "tracker"), start, ready="camera model from", ready_timeout_s=0.5)
+    sup.add("tracker", _sleeper(tmp_path, "tracker"), start, ready=lambda p: _ready(tmp_path, p), ready_timeout_s=0.5)
     try:
         end = time.monotonic() + 1.0          # the first start: never checked
         while time.monotonic() < end:
@@ -132,13 +137,13 @@ def test_a_node_that_never_gets_ready_is_killed_and_restarted(tmp_path):
 def test_a_node_out_of_restarts_that_hangs_ends_the_run(tmp_path):
     sup = Supervisor(RestartPolicy(max_restarts=1, backoff_s=0.0), log=lambda s: None)
     sup.add("tracker", _sleeper(tmp_path, "tracker"), lambda label: _sleeper(tmp_path, label),
-            ready="never printed", ready_timeout_s=0.3)
+            ready=lambda p: False, ready_timeout_s=0.3)
     try:
         sup.process("tracker").send(signal.SIGKILL)
         _poll_until(sup, lambda: sup.stop_reason is not None)
         assert sup.stop_reason.startswith("tracker exited (SIGKILL; 1 restart(s) used)")
         with pytest.raises(ValueError, match="ready_timeout_s"):
-            sup.add("x", sup.process("tracker"), lambda label: None, ready="x", ready_timeout_s=0)
+            sup.add("x", sup.process("tracker"), lambda label: None, ready=lambda p: True, ready_timeout_s=0)
     finally:
         sup.stop_all(warn=lambda s: None)
     assert sup.unclean_stops() == [], "its exit is the stop reason, not an unclean stop at the end"
@@ -148,11 +153,11 @@ def test_a_node_is_recovering_from_its_exit_until_its_restart_is_ready(tmp_path)
     starts = []
 
     def start(label):       # the first restart hangs, the second gets ready
-        cmd = "exec sleep 60" if not starts else "sleep 0.3; echo camera model from camera_info; exec sleep 60"
+        cmd = "exec sleep 60" if not starts else f"sleep 0.3; touch {tmp_path / label}.ready; exec sleep 60"
         starts.append(label)
         return NodeProcess(["sh", "-c", cmd], dict(os.environ), tmp_path / f"{label}.log", label)
     sup = Supervisor(RestartPolicy(max_restarts=2, backoff_s=0.3), log=lambda s: None)
-    sup.add("tracker", _sleeper(tmp_path, "tracker"), start, ready="camera model from", ready_timeout_s=0.6)
+    sup.add("tracker", _sleeper(tmp_path, "tracker"), start, ready=lambda p: _ready(tmp_path, p), ready_timeout_s=0.6)
     sup.add("planner", _sleeper(tmp_path, "planner"), lambda label: _sleeper(tmp_path, label))
     seen = [sup.recovering()]
     try:
@@ -168,8 +173,8 @@ def test_a_node_is_recovering_from_its_exit_until_its_restart_is_ready(tmp_path)
             if seen[-1] != state:
                 seen.append(state)
             time.sleep(0.02)
-        # both wait for their restarts; the planner (no readiness pattern) is back once restarted,
-        # the tracker once a restart of it logs the pattern (the first one hangs and is restarted)
+        # both wait for their restarts; the planner (no readiness check) is back once restarted,
+        # the tracker once a restart of it says it is ready (the first one hangs and is restarted)
         assert seen == [[], ["planner", "tracker"], ["tracker"], []], seen
         assert [e.what for e in sup.events if e.node == "tracker"] == ["exited", "restarted", "hung", "exited",
                                                                        "restarted"]

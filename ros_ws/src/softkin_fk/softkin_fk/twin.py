@@ -335,21 +335,27 @@ def main(argv=None) -> int:
     procs = []
     graph = finger_graph(args, out, port)
 
-    def start(name):
+    from soft_robot_common.graph_watch import GraphWatch
+    watch = GraphWatch(int(env["ROS_DOMAIN_ID"]), "softkin_twin_start")
+
+    def start(name, timeout, keys=("ready",)):
+        """Start a node and wait until its diagnostics say it is ready (never its log)."""
         pr = graph[name].start(env, out)
         procs.append(pr)
-        return pr
+        watch.wait_ready(name, pr.pid, keys=keys, timeout=timeout, procs=procs)
 
     t_start = time.monotonic()
     try:
-        start("recorder").wait_for_log("recording", 60)
+        start("recorder", 60, keys=())      # up: it subscribes to the topics once their publishers start
         if not args.port:
-            start("marlin_emulator").wait_for_log("emulated Marlin board", 60)
-        start("stepper_driver").wait_for_log("board ready", 60)
-        start("kinematics_node").wait_for_log("ready in", 300)
+            start("marlin_emulator", 60)
+        start("stepper_driver", 60)
+        start("kinematics_node", 300)
         startup = time.monotonic() - t_start
+        watch.close()
         runs = run_curves(args, env)
     finally:
+        watch.close()
         codes = {}
         for pr in reversed(procs):
             codes[pr.name] = pr.stop()

@@ -6,8 +6,11 @@ pair is empty). A new command cancels a pending pulse of an older one only if th
 overlap: they share a limb and their heating intervals intersect (the newer command
 wins; the limb is not heated twice back to back). Every command is checked whole by the
 :class:`~frog_bridge.core.protection.LimbGuard` (a primitive is executed entirely or not
-at all, so a refusal never turns a straight stroke into a turn), and commands older than
-``max_command_age_s`` are dropped, never replayed.
+at all, so a refusal never turns a straight stroke into a turn), and nothing fires on a stale
+state: every command carries the stamp of the state it was decided on
+(:func:`frog_common.state_age.command_state`), a command whose state would be older than
+``max_state_age_s`` when its last pulse is due is refused whole, and a pending pulse whose
+state has grown older than that by its write is dropped, never written later.
 
 Times are seconds on one clock chosen by the caller (the node's clock).
 """
@@ -20,6 +23,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 
 from frog_common.primitives import PRIMITIVE_NAMES, limb_label
+from frog_common.state_age import command_state, state_age_problem
 
 from .limbs import primitive_pairs
 from .protection import LimbGuard, PlannedPulse
@@ -27,7 +31,7 @@ from .protection import LimbGuard, PlannedPulse
 # Reasons a command or pulse is not written (counter keys, also in diagnostics).
 REFUSED_INTERVAL = "interval"
 REFUSED_DUTY = "duty_cycle"
-REFUSED_STALE = "stale"
+REFUSED_STATE_AGE = "state_age"      # the state behind the command is older than max_state_age_s
 REFUSED_INVALID = "invalid"
 REFUSED_LINK = "link_not_ready"
 REFUSED_STALLED = "link_stalled"
@@ -41,13 +45,15 @@ CANCELLED_WATCHDOG = "watchdog_cancelled"     # no primitive for primitive_timeo
 
 @dataclass(frozen=True)
 class TimedPulse:
-    """A pulse to write at ``due``; ``label`` says where it comes from (for logs)."""
+    """A pulse to write at ``due``; ``label`` says where it comes from (for logs); ``state``: the
+    stamp of the state its command was decided on."""
 
     due: float
     limbs: tuple[int, ...]
     duration: float
     label: str
     command_id: int
+    state: float
 
     def planned(self) -> PlannedPulse:
         return PlannedPulse(self.due, self.limbs, self.duration)
@@ -76,58 +82,56 @@ class CommandScheduler:
         The per-limb limits (it also keeps the history of written pulses).
     pulse_s : float
         Heating pulse length [s] (what ``p`` sets).
-    max_command_age_s : float
-        A command whose stamp is older than this at submission, or a pulse not written
-        within this of its due time, is dropped.
+    max_state_age_s : float
+        A command whose state would be older than this when its last pulse is due is refused;
+        a pulse whose state is older than this when it is written is dropped.
     """
 
-    def __init__(self, guard: LimbGuard, pulse_s: float, max_command_age_s: float):
+    def __init__(self, guard: LimbGuard, pulse_s: float, max_state_age_s: float):
         if not pulse_s > 0:
             raise ValueError(f"pulse_s {pulse_s!r} must be > 0")
-        if not max_command_age_s > 0:
-            raise ValueError(f"max_command_age_s {max_command_age_s!r} must be > 0")
+        if not max_state_age_s > 0:
+            raise ValueError(f"max_state_age_s {max_state_age_s!r} must be > 0")
         self.guard = guard
         self.pulse_s = pulse_s
-        self.max_command_age_s = max_command_age_s
+        self.max_state_age_s = max_state_age_s
         self.pending: list[TimedPulse] = []
         self.counts: Counter[str] = Counter()
         self._ids = itertools.count(1)
 
     # -- submissions ------------------------------------------------------------------
-    def _age_problem(self, stamp: float | None, now: float) -> str | None:
-        if stamp is None:
-            return None
-        age = now - stamp
-        if age > self.max_command_age_s:
-            return f"command is {age:.3f} s old (max_command_age_s {self.max_command_age_s:g} s)"
-        if age < -self.max_command_age_s:
-            return (f"command stamp is {-age:.3f} s in the future (do the sender and the bridge "
-                    f"use the same clock? use_sim_time)")
-        return None
+    def _state_problem(self, state: float, now: float, last_due: float) -> str | None:
+        """Why a command on ``state`` may not fire: too old at its last pulse, or stamped ahead."""
+        if state > now + self.max_state_age_s:
+            return state_age_problem(now - state, self.max_state_age_s)
+        return state_age_problem(last_due - state, self.max_state_age_s)
 
-    def submit_primitive(self, primitive_id: int, stamp: float | None, now: float) -> Decision:
-        """Schedule primitive ``primitive_id`` (0-8) chosen at ``stamp`` (None = unknown)."""
+    def submit_primitive(self, primitive_id: int, stamp: float, now: float, state_stamp: float = 0.0) -> Decision:
+        """Schedule primitive ``primitive_id`` (0-8) chosen at ``stamp`` on the state ``state_stamp``
+        (0 = unset: :func:`~frog_common.state_age.command_state`)."""
         try:
             front, rear = primitive_pairs(primitive_id)
         except ValueError as exc:
             return self._refuse(REFUSED_INVALID, str(exc))
         name = PRIMITIVE_NAMES[primitive_id]
-        problem = self._age_problem(stamp, now)
+        state = command_state(state_stamp, stamp, now)
+        problem = self._state_problem(state, now, now + (self.pulse_s if rear else 0.0))
         if problem:
-            return self._refuse(REFUSED_STALE, f"primitive {name}: {problem}")
+            return self._refuse(REFUSED_STATE_AGE, f"primitive {name}: {problem}")
         cid = next(self._ids)
         pulses = []
         if front:
-            pulses.append(TimedPulse(now, front, self.pulse_s, f"{name} front", cid))
+            pulses.append(TimedPulse(now, front, self.pulse_s, f"{name} front", cid, state))
         if rear:
-            pulses.append(TimedPulse(now + self.pulse_s, rear, self.pulse_s, f"{name} rear", cid))
+            pulses.append(TimedPulse(now + self.pulse_s, rear, self.pulse_s, f"{name} rear", cid, state))
         return self._schedule(pulses, f"primitive {name}")
 
-    def submit_limbs(self, limbs, stamp: float | None, now: float, pulse_s: float = 0.0) -> Decision:
+    def submit_limbs(self, limbs, stamp: float, now: float, pulse_s: float = 0.0, state_stamp: float = 0.0) -> Decision:
         """Schedule one pulse of ``limbs`` now (a direct limb command from a tool).
 
         ``pulse_s`` is the pulse length the sender asks for: 0 means the bridge's own; any
         other value must equal it (the relay has one pulse length, set once with ``p``).
+        ``stamp`` and ``state_stamp`` as for :meth:`submit_primitive`.
         """
         # NaN compares False with everything: test finiteness first, or NaN passes as "close"
         if not math.isfinite(pulse_s) or pulse_s < 0.0:
@@ -141,11 +145,12 @@ class CommandScheduler:
         if not limbs or len(set(limbs)) != len(limbs) or any(i not in (0, 1, 2, 3) for i in limbs):
             return self._refuse(REFUSED_INVALID, f"limb ids {list(limbs)} must be distinct, in 0-3, "
                                                  f"at least one (FL 0, FR 1, BL 2, BR 3)")
-        problem = self._age_problem(stamp, now)
+        state = command_state(state_stamp, stamp, now)
+        problem = self._state_problem(state, now, now)
         if problem:
-            return self._refuse(REFUSED_STALE, f"limb command {limb_label(limbs)}: {problem}")
+            return self._refuse(REFUSED_STATE_AGE, f"limb command {limb_label(limbs)}: {problem}")
         cid = next(self._ids)
-        pulse = TimedPulse(now, limbs, self.pulse_s, f"limbs {limb_label(limbs)}", cid)
+        pulse = TimedPulse(now, limbs, self.pulse_s, f"limbs {limb_label(limbs)}", cid, state)
         return self._schedule([pulse], f"limb command {limb_label(limbs)}")
 
     def _refuse(self, key: str, reason: str) -> Decision:
@@ -170,11 +175,12 @@ class CommandScheduler:
         return self.pending[0].due if self.pending else None
 
     def pop_due(self, now: float) -> tuple[list[TimedPulse], list[TimedPulse]]:
-        """Pulses due by ``now``: ``(to_write, stale)``; stale ones are dropped and counted."""
+        """Pulses due by ``now``: ``(to_write, stale)``; a pulse whose state is older than
+        ``max_state_age_s`` now (a late timer, a stopped process) is stale: dropped and counted."""
         due = [p for p in self.pending if p.due <= now]
         self.pending = [p for p in self.pending if p.due > now]
-        stale = [p for p in due if now - p.due > self.max_command_age_s]
-        self.counts[REFUSED_STALE] += len(stale)
+        stale = [p for p in due if now - p.state > self.max_state_age_s]
+        self.counts[REFUSED_STATE_AGE] += len(stale)
         return [p for p in due if p not in stale], stale
 
     def written(self, pulse: TimedPulse, at: float) -> None:

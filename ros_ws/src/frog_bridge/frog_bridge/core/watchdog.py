@@ -6,7 +6,7 @@ every pulse still pending (a rear pair of the last primitive, due one pulse afte
 and reports it; a fresh primitive afterwards is accepted normally, since it is fresh.
 
 The watchdog measures the time since the last primitive arrived (whether a primitive is
-too old to execute is the scheduler's check, ``max_command_age_s``). Times are seconds on
+rests on a state too old to fire is the scheduler's check, ``max_state_age_s``). Times are seconds on
 one clock chosen by the caller (the node's clock: simulated time in the twin, so a stalled
 simulation does not trip it); when that clock goes back (a restarted simulator), the count
 starts over.

@@ -4,8 +4,13 @@ Subscribes ``frog/primitive`` (soft_robot_interfaces/Primitive) and ``frog/limb_
 (LimbActivation, direct limb commands from tools; not ``frog/limb_activation``, which is
 what the robot fired and would loop back from the emulator), writes ``p``/``h`` lines to
 the serial port, publishes every line it wrote on ``frog/bridge/sent`` (LimbActivation,
-stamped at the write), the robot's orientation on ``frog/imu`` (sensor_msgs/Imu) and the
-link's health on ``diagnostics``. An ``EMERGENCY`` line stops all actuation until
+stamped at the write, with the stamp of the state its command was decided on and that
+state's age at the write), the robot's orientation on ``frog/imu`` (sensor_msgs/Imu) and the
+link's health on ``diagnostics``. It is the last hop before the hardware: a command whose
+state (``state_stamp``; a command without one is its own state) would be older than
+``max_state_age_s`` when its pulses are written is refused, and a pending pulse whose state
+has aged past it is dropped (``refused_state_age`` in diagnostics), whatever the planner did.
+An ``EMERGENCY`` line stops all actuation until
 ``~/clear_emergency`` (std_srvs/Trigger); so does a message on ``frog/stop``
 (std_msgs/Empty, the run's one stop: the planner stops deciding and the bridge cancels
 every pending pulse at once). Its own watchdog: when no ``frog/primitive`` (I included) has
@@ -24,17 +29,19 @@ import sys
 import time
 from collections import Counter, deque
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.time import Time
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
-from soft_robot_common import (ConfigurationError, MessageGate, Param, declare_parameters, params_from_dataclass,
-                                run_node)
+from soft_robot_common import (ConfigurationError, MessageGate, NodeDiagnostics, Param, declare_parameters,
+                               params_from_dataclass, run_node)
 from std_msgs.msg import Empty
 from std_srvs.srv import Trigger
 
 from frog_common.primitives import PRIMITIVE_NAMES, limb_label
+from frog_common.state_age import StateAgeSettings
 from frog_common.settings import from_params
 from soft_robot_common.link_state import LinkState, LinkSupervisor
 from frog_bridge.core.protection import LimbGuard, ProtectionConfig
@@ -52,9 +59,7 @@ PARAMS = [
     Param("baud", 115200, "baud rate", min=1200, max=4_000_000),
     Param("pulse_ms", 80, "SMA heating pulse length sent once with 'p' [ms]; also the front-to-rear delay",
           min=10, max=500),
-] + params_from_dataclass(ProtectionConfig) + [
-    Param("max_command_age_s", 0.5, "commands older than this (header stamp) are dropped, never replayed [s]",
-          min=0.01, max=60.0),
+] + params_from_dataclass(ProtectionConfig) + params_from_dataclass(StateAgeSettings) + [
     Param("reconnect_period_s", 0.5, "first retry after the device is lost or fails to open [s]",
           min=0.05, max=60.0),
     Param("reconnect_max_period_s", 5.0, "retries back off (x2) up to this period [s]", min=0.05, max=600.0),
@@ -92,10 +97,9 @@ def _validate(p: dict) -> str | None:
     return None
 
 
-def _stamp_s(stamp) -> float | None:
-    """Header stamp in seconds; None for an unset (zero) stamp."""
-    ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-    return ns * 1e-9 if ns else None
+def _stamp_s(stamp) -> float:
+    """A stamp in seconds (0.0 for an unset stamp)."""
+    return (stamp.sec * 1_000_000_000 + stamp.nanosec) * 1e-9
 
 
 class BridgeNode(Node):
@@ -114,7 +118,7 @@ class BridgeNode(Node):
         try:
             self.scheduler = CommandScheduler(
                 LimbGuard(from_params(ProtectionConfig, p)),
-                self.pulse_s, p["max_command_age_s"])
+                self.pulse_s, p["max_state_age_s"])
             supervisor = LinkSupervisor(p["reconnect_period_s"], p["reconnect_max_period_s"],
                                         p["settle_s"], p["stall_timeout_s"])
             self.watchdog = PrimitiveWatchdog(p["primitive_timeout_s"])
@@ -134,7 +138,6 @@ class BridgeNode(Node):
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.sent_pub = self.create_publisher(LimbActivation, "frog/bridge/sent", qos)
         self.imu_pub = self.create_publisher(Imu, "frog/imu", qos)
-        self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.create_subscription(Primitive, "frog/primitive", self.on_primitive, qos)
         self.create_subscription(LimbActivation, "frog/limb_command", self.on_limb_command, qos)
         self.create_service(Trigger, "~/clear_emergency", self.on_clear_emergency)
@@ -146,7 +149,8 @@ class BridgeNode(Node):
         # Device supervision (settle, stall) runs on a steady clock: the device runs in real time
         # even when the graph runs on simulated time. Commands and stamps use the node clock.
         self.create_timer(0.1, self.supervise, clock=self._steady)
-        self.create_timer(p["diagnostics_period_s"], self.publish_diagnostics, clock=self._steady)
+        self.diagnostics = NodeDiagnostics(self, "serial link", self._diagnostics, hardware_id=p["port"],
+                                           period_s=p["diagnostics_period_s"])
         self.link.start()
         # Objects made so far live as long as the node: keep them out of the collector's full
         # passes, which otherwise add milliseconds to a write now and then.
@@ -154,10 +158,12 @@ class BridgeNode(Node):
         self.get_logger().info(
             f"bridge to {p['port']} at {p['baud']} baud: pulse {p['pulse_ms']} ms, limb protection "
             f"{p['min_limb_interval_s']:g} s / {p['max_duty_cycle'] * 100:g} % of {p['duty_window_s']:g} s, "
-            f"commands older than {p['max_command_age_s']:g} s dropped, watchdog {p['primitive_timeout_s']:g} s "
+            f"no pulse on a state older than {p['max_state_age_s']:g} s, watchdog {p['primitive_timeout_s']:g} s "
             f"without a primitive")
 
     def _on_parameters(self, changed: dict) -> None:
+        if "max_state_age_s" in changed:
+            self.scheduler.max_state_age_s = changed["max_state_age_s"]
         if "primitive_timeout_s" in changed:
             self.watchdog.timeout_s = changed["primitive_timeout_s"]
             self._warn_timeout(changed["primitive_timeout_s"])
@@ -189,7 +195,8 @@ class BridgeNode(Node):
         self._feed_watchdog()
         if not self._link_allows(f"primitive {name}"):
             return
-        self._decided(self.scheduler.submit_primitive(msg.id, _stamp_s(msg.header.stamp), self._now()), t_in)
+        self._decided(self.scheduler.submit_primitive(msg.id, _stamp_s(msg.header.stamp), self._now(),
+                                                      _stamp_s(msg.state_stamp)), t_in)
 
     def on_limb_command(self, msg) -> None:
         t_in = time.perf_counter()
@@ -203,7 +210,7 @@ class BridgeNode(Node):
         if not self._link_allows(f"limb command {limb_label(limbs)}"):
             return
         self._decided(self.scheduler.submit_limbs(limbs, _stamp_s(msg.header.stamp), self._now(),
-                                                  msg.pulse_duration), t_in)
+                                                  msg.pulse_duration, _stamp_s(msg.state_stamp)), t_in)
 
     def _refuse_input(self, what: str, problem: str) -> None:
         """A message the common rule refuses (non-finite, oversized): counted, logged rate-limited."""
@@ -258,7 +265,7 @@ class BridgeNode(Node):
         silence = self.watchdog.silence(now)
         if self.watchdog.fed(now):
             self.get_logger().info(f"primitives again after {silence:.2f} s without: watchdog cleared")
-            self.publish_diagnostics()
+            self.diagnostics.publish()
 
     def _check_watchdog(self) -> None:
         """Trip the watchdog if the planner has been silent too long: cancel every pending pulse."""
@@ -271,7 +278,7 @@ class BridgeNode(Node):
         self._arm_due_timer()
         self.get_logger().warn(f"no primitive for {self.watchdog.silence(now):.2f} s (planner lost?): {n} pending "
                                f"pulse(s) cancelled; a fresh primitive is executed normally")
-        self.publish_diagnostics()
+        self.diagnostics.publish()
 
     # -- writing -------------------------------------------------------------------------
     def _write_due(self, t_in: float | None = None) -> None:
@@ -279,7 +286,8 @@ class BridgeNode(Node):
         self._check_watchdog()              # before any pulse: is the planner still there?
         to_write, stale = self.scheduler.pop_due(self._now())
         for p in stale:
-            self.get_logger().warn(f"dropped {p.label} pulse: not written within max_command_age_s of its time")
+            self.get_logger().warn(f"dropped {p.label} pulse: its state is {self._now() - p.state:.3f} s old at the "
+                                   f"write (max_state_age_s {self.scheduler.max_state_age_s:g} s)")
         for p in to_write:
             problem = self.link.write_line(encode_heat(p.limbs))
             if problem:
@@ -291,8 +299,10 @@ class BridgeNode(Node):
             now = self.get_clock().now()
             self.scheduler.written(p, now.nanoseconds * 1e-9)
             self.counts["lines_written"] += 1
-            msg = self._LimbActivation(limbs=list(p.limbs), pulse_duration=self.pulse_s)
+            msg = self._LimbActivation(limbs=list(p.limbs), pulse_duration=self.pulse_s,
+                                       state_age=now.nanoseconds * 1e-9 - p.state)
             msg.header.stamp = now.to_msg()
+            msg.state_stamp = Time(nanoseconds=round(p.state * 1e9), clock_type=now.clock_type).to_msg()
             self.sent_pub.publish(msg)
             self.get_logger().debug(f"sent {p.label}: h {' '.join(map(str, p.limbs))}")
         self._arm_due_timer()
@@ -323,7 +333,7 @@ class BridgeNode(Node):
                 lo, hi = self.cfg["reconnect_period_s"], self.cfg["reconnect_max_period_s"]
                 self.get_logger().error(f"serial link lost ({ev.text}); {n} pending pulse(s) cancelled, "
                                         f"retrying every {lo:g}-{hi:g} s")
-                self.publish_diagnostics()
+                self.diagnostics.publish()
             elif ev.kind == "open_failed":
                 self.get_logger().warn(f"cannot open {self.cfg['port']}: {ev.text}; retrying",
                                        throttle_duration_sec=10.0)
@@ -373,7 +383,7 @@ class BridgeNode(Node):
             self._arm_due_timer()
             self.get_logger().error(f"robot reports {excerpt(text, 80)}: all actuation stopped ({n} pending "
                                     f"pulse(s) cancelled) until ~/clear_emergency")
-            self.publish_diagnostics()
+            self.diagnostics.publish()
 
     def on_stop(self, msg) -> None:
         """frog/stop: cancel every pending pulse now and refuse new ones until ~/clear_emergency."""
@@ -394,7 +404,7 @@ class BridgeNode(Node):
         if was:
             response.message = f"emergency cleared; link is {state.value}"
             self.get_logger().info(response.message)
-            self.publish_diagnostics()
+            self.diagnostics.publish()
         else:
             response.message = f"no emergency was latched; link is {state.value}"
         return response
@@ -415,7 +425,7 @@ class BridgeNode(Node):
             after = f" (reconnected {now - self.lost_at:.2f} s after the loss)" if self.lost_at else ""
             self.get_logger().info(f"link ready: sent 'p {self.cfg['pulse_ms']}'{after}; state {state.value}")
             self.lost_at = None
-            self.publish_diagnostics()
+            self.diagnostics.publish()
         link = self.link.snapshot(now)
         stalled, age = link.stalled, link.line_age
         if stalled != self.was_stalled:
@@ -426,7 +436,8 @@ class BridgeNode(Node):
             else:
                 self.get_logger().info("link alive again: lines from the relay resumed")
 
-    def publish_diagnostics(self) -> None:
+    def _diagnostics(self):
+        """(level, message, values) of the link, the watchdog and the refusals (NodeDiagnostics)."""
         link = self.link.snapshot()
         state, stalled, age = link.state, link.stalled, link.line_age
         problem, losses, emergency = link.last_problem, link.losses, link.emergency_text
@@ -465,12 +476,8 @@ class BridgeNode(Node):
         values["refused_total"] = str(sum(v for k, v in self.scheduler.counts.items() if "cancelled" not in k))
         for k, v in sorted(self.scheduler.counts.items()):
             values[("cancelled_" + k.replace("_cancelled", "")) if "cancelled" in k else f"refused_{k}"] = str(v)
-        status = DiagnosticStatus(level=level, name=f"{self.get_name()}: serial link", message=message,
-                                  hardware_id=self.cfg["port"],
-                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.diag_pub.publish(msg)
+        values["ready"] = str(state is LinkState.READY and not stalled).lower()
+        return level, message, values
 
     def shutdown(self) -> None:
         """Cancel pending pulses (no new heating on the way out) and close the port."""

@@ -154,7 +154,7 @@ class RobotEmulator(Node):
     def _diagnostics(self):
         from soft_robot_common.diagnostics import OK, WARN
         values = dict(self.counts, device=self.device.device_path, dropped_bytes=self.device.dropped_bytes,
-                      heading_known=self.yaw is not None, loss_rate=self.ble.loss_rate)
+                      heading_known=self.yaw is not None, loss_rate=self.ble.loss_rate, ready=self.device.plugged)
         if not self.device.plugged:
             return WARN, "unplugged (fault injected): waiting for ~/replug or the replug timer", values
         if time.monotonic() < self.stalled_until:

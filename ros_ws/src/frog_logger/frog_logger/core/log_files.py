@@ -115,8 +115,12 @@ def summarize(path) -> FileSummary:
     return summary
 
 
-def read_messages(path, topics: Optional[list[str]] = None) -> Iterator[tuple]:
-    """Yield ``(topic, log_time_ns, decoded_message)`` in file order.
+def read_messages(path, topics: Optional[list[str]] = None, publish_time: bool = False) -> Iterator[tuple]:
+    """Yield ``(topic, log_time_ns, decoded_message)`` in file order; with ``publish_time``,
+    ``(topic, log_time_ns, publish_time_ns, decoded_message)``.
+
+    ``log_time`` is when the recorder received the message, ``publish_time`` when its publisher
+    wrote it (the DDS source timestamp; the receive time where the middleware gave none).
 
     Raises
     ------
@@ -129,7 +133,10 @@ def read_messages(path, topics: Optional[list[str]] = None) -> Iterator[tuple]:
         try:
             for schema, channel, message, decoded in reader.iter_decoded_messages(
                     topics=topics, log_time_order=False):
-                yield channel.topic, message.log_time, decoded
+                if publish_time:
+                    yield channel.topic, message.log_time, message.publish_time, decoded
+                else:
+                    yield channel.topic, message.log_time, decoded
         except McapError as exc:
             raise LogFileError(f"{str(p)!r} cannot be read to the end ({exc}); if the "
                                f"recorder was killed, run: frog-log recover {p}") from exc

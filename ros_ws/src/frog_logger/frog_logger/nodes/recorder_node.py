@@ -15,10 +15,10 @@ import re
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from soft_robot_common import ConfigurationError, Param, declare_parameters, run_node
+from soft_robot_common import ConfigurationError, NodeDiagnostics, Param, declare_parameters, run_node
+from soft_robot_common.diagnostics import ERROR, OK
 
 from frog_logger.core.message_definitions import MessageDefinitionError, full_message_definition
 from frog_logger.core.recording import Recording, RecordingError
@@ -148,10 +148,9 @@ class RecorderNode(Node):
         self._last_error_log = 0.0
         self._last_retry = 0.0
         self._retry_period = p["retry_period_s"]
-        self._diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.create_timer(p["discovery_period_s"], self.discover)
         self.create_timer(p["flush_period_s"], self.flush)
-        self.create_timer(1.0, self.publish_diagnostics)
+        self.diagnostics = NodeDiagnostics(self, "recording", self._diagnostics, hardware_id="")
         earlier = self.recording.existing_files
         self.get_logger().info(
             f"recording {'topics ' + ', '.join(self.topics) if self.topics else 'all topics'} "
@@ -237,21 +236,16 @@ class RecorderNode(Node):
                 f"far; will retry in a new file every {self._retry_period:g} s "
                 f"(salvage the broken file with: frog-log recover)")
 
-    def publish_diagnostics(self) -> None:
+    def _diagnostics(self):
+        """(level, message, values): the file, counts per topic (``messages <topic>`` for every topic
+        subscribed: the typed record of what is recorded), drops; ``ready`` once every topic asked
+        for in ``topics`` is subscribed (all-topics mode: at once)."""
         rec = self.recording
-        status = DiagnosticStatus(
-            name=f"{self.get_name()}: recording", hardware_id="",
-            level=DiagnosticStatus.ERROR if rec.error else DiagnosticStatus.OK,
-            message=rec.error or f"recording {len(rec.topics)} topics")
-        status.values = [
-            KeyValue(key="file", value=str(rec.current_file)),
-            KeyValue(key="messages", value=str(rec.message_count)),
-            KeyValue(key="dropped_messages", value=str(rec.dropped_messages)),
-            KeyValue(key="files", value=str(len(rec.files))),
-        ] + [KeyValue(key=f"messages {t.name}", value=str(t.message_count)) for t in rec.topics.values()]
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self._diag_pub.publish(msg)
+        values = {"file": str(rec.current_file), "messages": rec.message_count,
+                  "dropped_messages": rec.dropped_messages, "files": len(rec.files),
+                  "ready": all(t in self._recorded for t in self.topics)}
+        values.update({f"messages {t.name}": t.message_count for t in rec.topics.values()})
+        return (ERROR if rec.error else OK), rec.error or f"recording {len(rec.topics)} topics", values
 
     def close(self) -> None:
         rec = self.recording

@@ -22,6 +22,8 @@ in it, so it is a floor for holding a turn, not for stop-and-turn manoeuvres.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -173,6 +175,33 @@ def radius_ahead(path, progress: float, lookahead: float) -> tuple:
         return float("inf"), 0
     i = int(np.argmax(np.abs(k)))
     return float(1.0 / abs(k[i])), int(np.sign(k[i]))
+
+
+def feasibility_at(path, limits: TurningLimits | None, progress: float, lookahead: float) -> tuple:
+    """(turn_radius_limit, path_radius_ahead, too_tight) at ``progress``: the status's feasibility fields.
+
+    The frog's tightest steady turn on the side the path bends within ``lookahead`` m ahead
+    (either side's tighter one where it is straight), the path's tightest radius there, and
+    whether the path is tighter than the frog can turn; NaN, NaN, False without ``limits``.
+    """
+    if limits is None:
+        return math.nan, math.nan, False
+    r, side = radius_ahead(path, progress, lookahead)
+    if side == 0:
+        return min(limits.left_m, limits.right_m), r, False
+    limit = limits.radius(side)
+    return limit, r, r < limit
+
+
+def describe_tight(path, limits: TurningLimits) -> str:
+    """One sentence: where ``path`` bends tighter than the frog can turn (it will cut there), or that it does not."""
+    tight = tight_stretches(path, limits)
+    if not tight:
+        return f"the {path.name} path is within the frog's turning circle everywhere"
+    share = sum(t["end_m"] - t["start_m"] for t in tight) / path.length
+    where = ", ".join(f"{t['start']:.2f}-{t['end']:.2f} (r {t['min_radius_m'] * 100:.1f} cm)" for t in tight)
+    return (f"the {path.name} path bends tighter than the frog can turn over {share * 100:.0f} % of its length, "
+            f"at progress {where}: it will cut there")
 
 
 def _distance_to_polyline(points, ref):

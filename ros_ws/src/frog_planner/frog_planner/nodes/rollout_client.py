@@ -9,8 +9,6 @@ the tree starts where the robot will be when it fires.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from geometry_msgs.msg import Pose2D, Twist
 
@@ -30,6 +28,7 @@ class RolloutClient:
         self.client = node.create_client(Rollouts, service)
         self.limb_names = limb_names       # LimbActivation id -> name ("FL", ...)
         self.fired = {}                    # limb name -> node-clock Time of its last pulse start
+        self.last_compute_s = float("nan")  # the server's compute time of the last response
 
     def on_sent(self, msg) -> None:
         """Record the limbs the bridge fired (``frog/bridge/sent``)."""
@@ -62,6 +61,23 @@ class RolloutClient:
         if future is not None and not future.done():
             self.client.remove_pending_request(future)
 
+    def result(self, future, reason, names, depth: int, reanchor: bool, deadline_periods: float, period: float):
+        """At the deadline: ``(expander, None)`` from a response that came in time, else ``(None, why not)``
+        (``reason``: why no request was sent). A request still pending is cancelled; the server's compute
+        time of the last response is kept (``last_compute_s``)."""
+        if future is None:
+            return None, reason
+        if not future.done():
+            self.cancel(future)
+            return None, (f"rollouts missed the deadline ({deadline_periods:.2f} periods = "
+                          f"{deadline_periods * period:.2f} s)")
+        try:
+            response = future.result()
+            self.last_compute_s = float(response.compute_time)
+            return self.expander(response, names, depth, reanchor)
+        except Exception as exc:           # noqa: BLE001 - a failed call is a fallback, not a crash
+            return None, f"rollout call failed: {exc}"
+
     @staticmethod
     def expander(response, names, depth: int, reanchor: bool = False):
         """The search's expander from a successful response, or (None, reason).
@@ -92,7 +108,3 @@ class RolloutClient:
         return (lambda pose, velocity, d: tree_from_rows(pose, rows, d, len(names))), None
 
 
-def lead_time(execute_at, pose_stamp) -> float:
-    """Seconds from the pose's capture stamp to the decision's execution (>= 0)."""
-    lead = (execute_at - pose_stamp).nanoseconds * 1e-9
-    return lead if math.isfinite(lead) and lead > 0 else 0.0

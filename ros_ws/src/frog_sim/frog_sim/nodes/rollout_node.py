@@ -97,7 +97,8 @@ class RolloutNode(Node):
                   "threads": self.rollouts.threads, "identify_limbs": self.cfg["identify_limbs"],
                   "identification_updates": self.identification.updates,
                   "yaw_torque_Nm": self.identification.torque,
-                  "yaw_torque_sd_Nm": self.identification.torque_estimate_sd}
+                  "yaw_torque_sd_Nm": self.identification.torque_estimate_sd,
+                  "ready": True}         # its diagnostics start once the rollouts are compiled and serve
         for limb, value in self.rollouts.limb_strength.items():
             values[f"strength_{limb}"] = value
             values[f"strength_sd_{limb}"] = self.identification.sd[limb]

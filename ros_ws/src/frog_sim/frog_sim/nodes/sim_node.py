@@ -24,14 +24,14 @@ import time
 
 
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, TransformStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from soft_robot_common import (ConfigurationError, MessageGate, Param, declare_parameters, params_from_dataclass,
-                                run_node)
+from soft_robot_common import (ConfigurationError, MessageGate, NodeDiagnostics, Param, declare_parameters,
+                               params_from_dataclass, run_node)
+from soft_robot_common.diagnostics import ERROR, OK, WARN
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
@@ -126,7 +126,6 @@ class SimNode(Node):
         self.shape_pub = self.create_publisher(Marker, "frog/sim/shape", qos)
         # /clock is global by ROS convention (use_sim_time nodes listen there)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10) if p["publish_clock"] else None
-        self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.tf_pub = None
         if p["publish_tf"]:
             try:
@@ -158,7 +157,8 @@ class SimNode(Node):
         self.step_wall_s = 0.0
         self.late_commands = 0            # primitives that arrived after their stamp + command_delay_s
         self.create_timer(0.01, self.tick)
-        self.create_timer(1.0, self.publish_diagnostics)
+        self.diagnostics = NodeDiagnostics(self, "simulation", self._diagnostics, hardware_id="frog_sim",
+                                           stamp=self._stamp)
         self.publish_state(force=True)
         self.get_logger().info(
             f"simulating the frog ({self.sim.model.n_nodes} nodes, EGaIn "
@@ -362,31 +362,19 @@ class SimNode(Node):
         self.get_logger().info(f"reset to the initial pose at world time {self.world_time:.3f} s")
         return response
 
-    def publish_diagnostics(self) -> None:
+    def _diagnostics(self):
         achieved = self.pacer.achieved_rtf(time.monotonic(), self.sim.time)
         sim_elapsed = self.sim.time - self.pacer.sim_start
-        status = DiagnosticStatus(
-            name=f"{self.get_name()}: simulation", hardware_id="frog_sim",
-            level=DiagnosticStatus.ERROR if self.error else DiagnosticStatus.WARN if self.cfg["paused"] else
-            DiagnosticStatus.OK,
-            message=self.error or ("paused (a clock stall): set paused false to continue" if self.cfg["paused"]
-                                   else "running"))
+        level = ERROR if self.error else WARN if self.cfg["paused"] else OK
+        message = self.error or ("paused (a clock stall): set paused false to continue" if self.cfg["paused"]
+                                 else "running")
         cost = self.step_wall_s / sim_elapsed if sim_elapsed > 0 else float("nan")
-        status.values = [
-            KeyValue(key="sim_time_s", value=f"{self.sim.time:.3f}"),
-            KeyValue(key="achieved_real_time_factor",
-                     value=f"{achieved:.2f}"),
-            KeyValue(key="compute_real_time_factor",
-                     value=f"{1 / cost:.1f}" if cost > 0 else "nan"),
-            KeyValue(key="steps", value=str(self.steps_total)),
-            KeyValue(key="lags_dropped", value=str(self.pacer.drops)),
-            KeyValue(key="lag_dropped_s", value=f"{self.pacer.dropped_total_s:.3f}"),
-            KeyValue(key="paused", value=str(self.cfg["paused"]).lower()),
-            KeyValue(key="late_commands", value=str(self.late_commands)),
-        ]
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self._stamp()
-        self.diag_pub.publish(msg)
+        return level, message, {
+            "sim_time_s": f"{self.sim.time:.3f}", "achieved_real_time_factor": f"{achieved:.2f}",
+            "compute_real_time_factor": f"{1 / cost:.1f}" if cost > 0 else "nan", "steps": self.steps_total,
+            "lags_dropped": self.pacer.drops, "lag_dropped_s": f"{self.pacer.dropped_total_s:.3f}",
+            "paused": bool(self.cfg["paused"]), "late_commands": self.late_commands,
+            "ready": self.error is None}
 
 
 def main(args=None) -> int:

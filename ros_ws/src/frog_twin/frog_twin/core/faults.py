@@ -1,4 +1,4 @@
-"""Faults injected into the running twin (issue 22): the spec, and what a run did under them.
+"""Faults injected into the running twin: the spec, and what a run did under them.
 
 A fault spec is a ``;``-separated list of ``KIND[:NODE]@AT[+DURATION][,key=value...]``::
 
@@ -15,13 +15,13 @@ A fault spec is a ``;``-separated list of ``KIND[:NODE]@AT[+DURATION][,key=value
 
 ``AT`` is in simulated seconds after the planner's start; durations are simulated seconds,
 except for ``clock_stall`` and ``sigstop`` (wall seconds: a paused clock does not run).
-Pure Python: parsing, the campaign's plan, and the metrics of one run from what the twin's
-watch node saw (which does not depend on the recorder, one of the nodes under test).
+Pure Python: parsing, the campaign's plan, and the metrics of one run: what the twin's watch
+node saw (which does not depend on the recorder, one of the nodes under test) and the audit of
+the state behind every pulse (:mod:`frog_twin.core.state_audit`).
 """
 
 from __future__ import annotations
 
-import bisect
 import math
 from dataclasses import dataclass, field, replace
 
@@ -38,7 +38,8 @@ KINDS = {
     "clock_stall": (True, None, {}),
     "sigstop": (True, None, {}),
 }
-#: nodes ``kill`` and ``sigstop`` may target (the world, sim_node, and the robot are not faults of the stack)
+#: nodes ``kill`` and ``sigstop`` may target (the world, sim_node, and the robot are not faults of the stack;
+#: the world may be stopped for a while: ``sigstop:sim_node``, a starved simulator)
 TARGETS = ("tracker_node", "planner_node", "bridge_node", "recorder", "camera_sim", "image_preview")
 WALL_DURATION = ("clock_stall", "sigstop")
 
@@ -105,7 +106,7 @@ def _parse_one(item: str) -> Fault:
     if not needs_duration and plus:
         raise FaultSpecError(f"fault {item!r}: {kind} takes no duration")
     if kind in ("kill", "sigstop"):
-        if target not in TARGETS:
+        if target not in TARGETS + (("sim_node",) if kind == "sigstop" else ()):
             raise FaultSpecError(f"fault {item!r}: {kind} needs a node, one of {', '.join(TARGETS)} "
                                  f"(e.g. {kind}:tracker_node@{at_text})")
     elif target:
@@ -148,13 +149,14 @@ def check_against_graph(faults, nodes) -> None:
 
 
 # -- the campaign's plan -------------------------------------------------------------------------
-#: one representative of each fault the campaign runs; durations longer than the planner's
-#: stale bound (2 periods = 2.9 s) where staleness is what the fault tests
+#: one representative of each fault the campaign runs; durations well beyond the state-age bound
+#: (0.5 s) where staleness is what the fault tests, and the stops of the vision-to-decision chain
+#: (5 s) and of the world (3 s) that signals from outside also send (frog_twin.outside_faults)
 CAMPAIGN_FAULTS = (
     "camera_freeze@0+5", "camera_stop@0+5", "occlude@0+4", "frame_drop@0+8,rate=0.5", "ble_loss@0+5,rate=0.8",
     "unplug@0+2", "emergency@0", "kill:tracker_node@0", "kill:planner_node@0", "kill:bridge_node@0",
     "kill:recorder@0", "kill:camera_sim@0", "kill:tracker_node@0,restart=no", "clock_stall@0+3",
-    "sigstop:planner_node@0+4", "sigstop:tracker_node@0+4",
+    "sigstop:planner_node@0+5", "sigstop:tracker_node@0+5", "sigstop:camera_sim@0+5", "sigstop:sim_node@0+3",
 )
 #: the moments of a path a fault is injected at, as fractions of the path's nominal time
 CAMPAIGN_MOMENTS = (0.2, 0.45, 0.7)
@@ -187,15 +189,10 @@ def campaign_plan(faults, moments, seeds, paths, path_times):
 class Observed:
     """What the twin's watch node saw (sim-time stamps [s]), independent of the recorder."""
 
-    odom: list = field(default_factory=list)          # stamps of frog/odom (what the planner decides on)
+    odom: list = field(default_factory=list)          # stamps of frog/odom
     decisions: list = field(default_factory=list)     # (stamp, primitive name) of frog/primitive
     fired: list = field(default_factory=list)         # stamps of frog/limb_activation (the robot fired)
     status: list = field(default_factory=list)        # (stamp, state) of frog/planner/status
-    pose_ages: list = field(default_factory=list)     # (stamp, pose_age) of frog/planner/status
-    # arrival order at the observer (one counter for both lists; empty = order by stamps): the
-    # causal order, where stamps from two nodes' clocks can disagree by a few hundred ms under load
-    decision_seq: list = field(default_factory=list)
-    fired_seq: list = field(default_factory=list)
 
 
 def restart_windows(restarts, stamps, discovery: float) -> list:
@@ -240,94 +237,6 @@ class Resubscription:
         for topic, t0 in self.waiting.items():
             out[topic].append((t0, float("inf")))
         return out
-
-
-def content_time(stamp: float, faults) -> float:
-    """When the information behind an odometry stamped ``stamp`` was seen by the camera.
-
-    Frames of a frozen camera are the frame at the freeze's start; during an occlusion the
-    tracker's odometry is a prediction from the last detection, at the occlusion's start.
-    Otherwise a stamp is its content's time.
-    """
-    for f in faults:
-        if f.kind in ("camera_freeze", "occlude") and f.at < stamp <= f.end:
-            return f.at
-    return stamp
-
-
-#: how far two nodes' clocks under /clock can differ: each follows /clock when its executor
-#: gets to it, so the robot's firing can be stamped a few ms before the decision behind it
-#: (the same ms in a quiet run; one period early was misread as a 1.4 s old command)
-CLOCK_SKEW_S = 0.05
-
-
-def stale_firings(obs: Observed, faults, pose_bound: float, command_bound: float, blind=(),
-                  witness_odom=(), witness_decisions=(), odom_blind=(), reported_pose_age=None) -> list[dict]:
-    """Limb firings on state older than the bounds: one dict per offending firing.
-
-    A firing comes from the last non-I primitive the observer received before it (arrival
-    order: causal; without it, by stamps, allowing ``CLOCK_SKEW_S``), decided at ``t_d``. Its state
-    is stale when the newest odometry before ``t_d`` holds information older than
-    ``pose_bound`` at ``t_d`` (:func:`content_time`), or when the command is older than
-    ``command_bound`` when it fires (a replayed or queued command). ``blind``: intervals in
-    which the observer may not see the decisions (a restarted planner whose publisher it has
-    not matched yet); an old-command verdict inside one is ``unverified``, not stale.
-    ``witness_odom``: odometry stamps another subscriber saw (the recording). The observer
-    matches a restarted tracker's publisher only after discovery, later than the planner may:
-    its own odometry alone made a kick on a 0.2 s old pose look 5 s old.
-    ``witness_decisions``: (stamp, name) of primitives another subscriber saw (the recording),
-    for the decisions of a restarted planner the observer has not matched yet.
-    ``odom_blind``: intervals in which neither witness may have matched a restarted tracker's
-    odometry publisher yet (the planner can match it seconds earlier); a stale-pose verdict on
-    a decision inside one, whose status reports (``reported_pose_age``: {decision stamp: the
-    planner's ``pose_age``}) a pose within the bound, is ``unverified``: no witness saw that
-    pose, and none saw its absence.
-    """
-    reported = reported_pose_age or {}
-    odom = sorted(set(obs.odom) | set(witness_odom))
-    stamps = sorted({t for t, n in (*obs.decisions, *witness_decisions) if n != "I"})
-    by_arrival = len(obs.decision_seq) == len(obs.decisions) and len(obs.fired_seq) == len(obs.fired) \
-        and obs.decision_seq
-    if by_arrival:
-        kicks = sorted((q, t) for (t, n), q in zip(obs.decisions, obs.decision_seq) if n != "I")
-        d_keys, d_stamps = [q for q, _ in kicks], [t for _, t in kicks]
-        firings = sorted(zip(obs.fired_seq, obs.fired))
-    else:
-        firings = [(None, t) for t in sorted(obs.fired)]
-    bad = []
-    for key, t in firings:
-        # the newer of two readings: by stamps (the robot's clock may trail the planner's by
-        # CLOCK_SKEW_S) and by arrival (the observer may take a firing off its queue before
-        # the decision that caused it: two topics, two publishers, one wait set)
-        candidates = []
-        i = bisect.bisect_right(stamps, t + CLOCK_SKEW_S) - 1
-        if i >= 0:
-            candidates.append(stamps[i])
-        if key is not None:
-            i = bisect.bisect_right(d_keys, key) - 1
-            if i >= 0:
-                candidates.append(d_stamps[i])
-        if not candidates:
-            bad.append({"fired": t, "why": "no primitive was decided before it"})
-            continue
-        t_d = max(candidates)
-        j = bisect.bisect_right(odom, t_d + 1e-6) - 1
-        if j < 0:
-            bad.append({"fired": t, "decided": t_d, "why": "decided before any odometry"})
-            continue
-        pose_age = t_d - content_time(odom[j], faults)
-        # the firing's stamp is the robot's clock, the decision's the planner's: under load the
-        # robot's can trail by a few hundred ms, so a negative age is a 0 age
-        if pose_age > pose_bound or t - t_d > command_bound:
-            if pose_age <= pose_bound:      # an old command: verified unless the decisions were unseen
-                unseen = any(a <= t <= b for a, b in blind)
-            else:                           # an old pose: verified unless the odometry was unseen
-                claim = reported.get(round(t_d, 6))
-                unseen = (t - t_d <= command_bound and claim is not None and claim <= pose_bound
-                          and any(a <= t_d <= b for a, b in odom_blind))
-            bad.append({"fired": t, "decided": t_d, "pose_age": pose_age, "command_age": t - t_d,
-                        "unverified": unseen})
-    return bad
 
 
 def recovery_time(status, t_start: float, t_end: float, window: float, following: int = 1,
@@ -404,47 +313,43 @@ def fault_end(fault: Fault, nominal_end: float, ran: list) -> float:
     return max(ran)
 
 
-def fault_report(faults, observer, sim_start: float, injector, recorded: dict, pose_bound: float,
-                 command_bound: float, goal: bool, stop_reason, unclean, recorded_odom=(),
-                 recorded_decisions=(), recorded_pose_ages=()) -> dict:
-    """The fault section of a run's metrics: outcome, stale firings, recorder losses, recovery.
+def fault_report(faults, observer, sim_start: float, injector, recorded: dict, pulse_ages, goal: bool,
+                 stop_reason, unclean) -> dict:
+    """The fault section of a run's metrics: outcome, pulses on stale state, recorder losses, recovery.
 
-    ``recorded_odom``, ``recorded_decisions``: the recording's odometry stamps and (stamp,
-    primitive name), a second witness of what existed; ``recorded_pose_ages``: (stamp,
-    pose_age) of the recorded planner statuses, what the planner reports of its pose."""
+    ``pulse_ages``: the recording's :class:`~frog_twin.core.state_audit.PulseAges` (the state
+    behind every pulse, by publish times and by the bridge's own record)."""
     obs = observer.obs
     shifted = [replace(f, at=f.at + sim_start) for f in faults]
-    reported = {round(t, 6): a for t, a in (*obs.pose_ages, *recorded_pose_ages) if math.isfinite(a)}
-    flagged = stale_firings(obs, shifted, pose_bound, command_bound, blind=observer.planner_blind(),
-                            witness_odom=recorded_odom, witness_decisions=recorded_decisions,
-                            odom_blind=observer.odom_blind(recorded_odom), reported_pose_age=reported)
-    stale = [b for b in flagged if not b.get("unverified")]
-    unverified = [b for b in flagged if b.get("unverified")]
+    # the recorded poses judge a pulse only while the recorder was up (1 s margins: its subscriptions)
+    pulse_ages.complete = [(a + 1.0, b) for a, b in observer.recorder_up if b > a + 1.0]
+    stale = pulse_ages.stale()
     gaps = observer.discovery_gaps()
     losses = recorder_losses(observer.seen, recorded, observer.recorder_up, excluded=gaps)
     deaf = getattr(observer, "recorder_deaf", ())
     unready = getattr(observer, "recorder_unready", ())
     lost = sum(v["lost"] for v in losses.values())
     per_fault = []
+    window = pulse_ages.bound_s + 2.0          # how long a fault takes to show in the planner's state
     for f, g in zip(faults, shifted):
-        ran = [t for t, _, what in injector.done if what.startswith(f.label() + ":")]
+        ran = [t for t, _, what in injector.done if what.startswith(f.label() + ":")] if injector else []
         t_end = fault_end(f, g.end, ran)
-        rec = None if f.kind == "emergency" else recovery_time(obs.status, g.at, t_end, pose_bound + 2.0)
+        rec = None if f.kind == "emergency" else recovery_time(obs.status, g.at, t_end, window)
         per_fault.append({"fault": f.label(), "end_s": t_end - sim_start, "recovery_s": rec})
     return {"outcome": outcome(goal, stop_reason, len(stale), lost, unclean),
             "stop_reason": None if goal else stop_reason,
-            "stale_firings": stale, "unverified_firings": unverified, "n_firings": len(obs.fired),
-            "pose_bound_s": pose_bound,
+            "stale_pulses": stale, "pulse_ages": pulse_ages.summary(), "n_firings": len(obs.fired),
+            "state_bound_s": pulse_ages.bound_s,
             "observed": {"decisions": obs.decisions, "fired": obs.fired, "n_odom": len(obs.odom)},
             "last_firing_s": max(obs.fired) - sim_start if obs.fired else None,
-            "command_bound_s": command_bound, "recorder": losses, "recorder_lost": lost,
+            "recorder": losses, "recorder_lost": lost,
             "recorder_up": observer.recorder_up, "discovery_gaps": gaps, "per_fault": per_fault,
             # the recorder alive but recording nothing (killed and restarted), or restarted and never ready
-            # (killed as hung, or exited, before its log said it subscribed): not up, so not checked;
+            # (killed as hung, or exited, before it said it subscribed): not up, so not checked;
             # what it did not record meanwhile is said
             "recorder_deaf": [(t0 - sim_start, t1 - sim_start, topic) for t0, t1, topic in deaf],
             "recorder_unready": [(t0 - sim_start, t1 - sim_start) for t0, t1 in unready],
             "recorder_deaf_missed": sum(v["lost"] for v in recorder_losses(
                 observer.seen, recorded, [(t0, t1) for t0, t1, _ in deaf] + list(unready), margin=0.0).values()),
-            "actions": [(t - sim_start, what) for t, _, what in injector.done],
-            "injector_failures": injector.failures(), "unclean_stops": list(unclean)}
+            "actions": [(t - sim_start, what) for t, _, what in injector.done] if injector else [],
+            "injector_failures": injector.failures() if injector else [], "unclean_stops": list(unclean)}

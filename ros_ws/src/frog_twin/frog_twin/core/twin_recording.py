@@ -36,7 +36,7 @@ class TwinRecording:
     tracked: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))   # t, x, y, heading
     status: np.ndarray = field(default_factory=lambda: np.zeros((0, 10)))
     # status columns: t, primitive id, total cost, cost distance, heading, progress, path progress,
-    # distance to path, state, pose age
+    # distance to path, state, state age
     primitives: list = field(default_factory=list)   # (t, name)
     sent: list = field(default_factory=list)         # (t, limbs)
     fired: list = field(default_factory=list)        # (t, limbs)
@@ -62,7 +62,7 @@ def read_twin_recording(mcap_files, with_images: bool = True) -> TwinRecording:
                 tracked.append([_t(m.header.stamp), p.x, p.y, yaw_of(m.pose.pose.orientation)])
             elif topic == TOPICS["status"]:
                 status.append([_t(m.header.stamp), m.primitive_id, m.total_cost, m.cost_distance, m.cost_heading,
-                               m.cost_progress, m.path_progress, m.distance_to_path, m.state, m.pose_age])
+                               m.cost_progress, m.path_progress, m.distance_to_path, m.state, m.state_age])
             elif topic == TOPICS["primitive"]:
                 rec.primitives.append((_t(m.header.stamp), m.name))
             elif topic == TOPICS["sent"]:
@@ -125,3 +125,22 @@ def recorded_stamps(mcap_files, topics) -> dict:
         for topic, _, m in read_messages(f, topics=list(topics)):
             out[topic].append(_t(m.header.stamp))
     return out
+
+
+def read_pulse_ages(mcap_files, bound_s: float):
+    """The :class:`~frog_twin.core.state_audit.PulseAges` of a recording: the state behind every pulse
+    on frog/bridge/sent, from the recorded odometry and tracker states (see that module)."""
+    from frog_twin.core.state_audit import measured_poses, pulse_ages
+    odom, states, pulses = [], {}, []
+    seen_states = False
+    for f in mcap_files:
+        for topic, log_ns, pub_ns, m in read_messages(f, ["/frog/odom", "/frog/tracker/state", "/frog/bridge/sent"],
+                                                      publish_time=True):
+            if topic == "/frog/odom":
+                odom.append((_t(m.header.stamp), pub_ns * 1e-9, log_ns * 1e-9))
+            elif topic == "/frog/tracker/state":
+                seen_states = True
+                states[round(_t(m.header.stamp), 6)] = _t(m.state_stamp)
+            elif len(m.limbs):
+                pulses.append((pub_ns * 1e-9, log_ns * 1e-9, float(m.state_age), _t(m.header.stamp)))
+    return pulse_ages(pulses, measured_poses(odom, states if seen_states else None), bound_s)

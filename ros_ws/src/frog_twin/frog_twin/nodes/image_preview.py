@@ -56,7 +56,7 @@ class ImagePreviewNode(Node):
 
     def _diagnostics(self):
         new, self._diag_received = self.counts["received"] - self._diag_received, self.counts["received"]
-        values = dict(self.counts, rate_hz=float(self.cfg["rate_hz"]))
+        values = dict(self.counts, rate_hz=float(self.cfg["rate_hz"]), ready=self.counts["received"] > 0)
         if new == 0:
             return WARN, f"waiting for {self.resolve_topic_name('camera/image_raw')}", values
         if self.counts["passed"] == 0 and self.last_refusal:

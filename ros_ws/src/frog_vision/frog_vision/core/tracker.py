@@ -152,3 +152,17 @@ class Tracker:
                 self.filter.reset()
         return TrackResult(stamp, state, meas if reason is None else None, reason, len(dets),
                            None if used is None else used.corners, time.perf_counter() - t0)
+
+
+def annotate(image: np.ndarray, result: TrackResult) -> np.ndarray:
+    """A BGR copy of ``image`` with the detected tag's outline and the state as text (the debug image)."""
+    import cv2
+    out = image.copy() if image.ndim == 3 else cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    if result.corners is not None:
+        cv2.polylines(out, [np.round(result.corners * 4).astype(np.int32)], True, (0, 0, 255), 1, cv2.LINE_AA, 2)
+    st = result.state
+    text = "lost" if st is None else (
+        f"x {st.pose[0]:+.3f} y {st.pose[1]:+.3f} th {np.degrees(st.pose[2]):+.1f} "
+        f"v {st.body_velocity[0] * 100:+.1f} cm/s w {np.degrees(st.body_velocity[2]):+.0f} deg/s")
+    cv2.putText(out, text, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 255), 1, cv2.LINE_AA)
+    return out

@@ -124,7 +124,8 @@ class CameraNode(Node):
 
     def _diagnostics(self):
         new, self._diag_frames = self.frames - self._diag_frames, self.frames
-        values = {"source": self.cfg["source"], "frames": self.frames, "frames_last_period": new}
+        values = {"source": self.cfg["source"], "frames": self.frames, "frames_last_period": new,
+                  "ready": self.source is not None and self.frames > 0}
         if self.source is None:
             what = f"retrying every {self.cfg['retry_period_s']:g} s" if self.cfg["retry"] else "not retrying"
             return ERROR, f"camera source not open ({self.source_error or 'ended'}); {what}", values

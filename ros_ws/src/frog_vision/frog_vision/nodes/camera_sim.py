@@ -22,14 +22,13 @@ import sys
 import time
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Odometry
-from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
-from soft_robot_common import (ConfigurationError, MessageGate, Param, declare_parameters, params_from_dataclass,
-                                run_node)
+from soft_robot_common import (ConfigurationError, MessageGate, NodeDiagnostics, Param, declare_parameters,
+                               params_from_dataclass, run_node)
+from soft_robot_common.diagnostics import OK, WARN
 from visualization_msgs.msg import Marker
 
 from frog_vision.core.camera_model import CameraModel
@@ -100,14 +99,13 @@ class CameraSimNode(Node):
         self.gate = MessageGate(self)    # logs once a second per input and problem (a new field at once)
         self.next_capture = None
         self.waiting_logged = False
-        self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.busy_s = 0.0
         self.render_s = 0.0
         self.cpu_s = 0.0
         self._diag_frames, self._diag_busy, self._diag_wall = 0, 0.0, time.monotonic()
         self.create_timer(0.5 / p["fps"], self.tick)
-        # diagnostics on the wall clock: they report the node's own load
-        self.create_timer(1.0, self.publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        # diagnostics on the wall clock (NodeDiagnostics): they report the node's own load
+        self.diagnostics = NodeDiagnostics(self, "camera simulator", self._diagnostics, hardware_id="camera_sim")
         self.get_logger().info(f"rendering {camera.width}x{camera.height} at {p['fps']:g} fps "
                                f"(tag {p['tag_family']} id {p['tag_id']}, noise {p['noise_sigma']:g})")
 
@@ -221,39 +219,31 @@ class CameraSimNode(Node):
         self.busy_s += time.perf_counter() - w0
         self.cpu_s += time.process_time() - c0
 
-    def publish_diagnostics(self) -> None:
+    def _diagnostics(self):
         wall = time.monotonic()
         frames, busy = self.frames - self._diag_frames, self.busy_s - self._diag_busy
         span = wall - self._diag_wall
         self._diag_frames, self._diag_busy, self._diag_wall = self.frames, self.busy_s, wall
         recent_refusal = self.refused > self._diag_refused
         self._diag_refused = self.refused
-        level = DiagnosticStatus.OK if self.odom and frames and not recent_refusal else DiagnosticStatus.WARN
+        level = OK if self.odom and frames and not recent_refusal else WARN
         faults = [n for n in ("fault_stopped", "fault_freeze") if self.cfg[n]]
         if faults:
-            level, text = DiagnosticStatus.WARN, "fault injected: " + ", ".join(faults)
+            level, text = WARN, "fault injected: " + ", ".join(faults)
         elif recent_refusal:
             text = self.last_refusal
         elif not self.odom:
             text = "waiting for frog/sim/odom"
         else:
             text = "rendering" if frames else "no frame rendered: waiting for odometry at the capture times"
-        status = DiagnosticStatus(name=f"{self.get_name()}: camera simulator", hardware_id="camera_sim",
-                                  level=level, message=text)
-        status.values = [KeyValue(key="frames", value=str(self.frames)),
-                         KeyValue(key="frames_per_wall_s", value=f"{frames / span:.1f}" if span > 0 else "nan"),
-                         KeyValue(key="render_publish_ms",
-                                  value=f"{busy / frames * 1e3:.2f}" if frames else "nan"),
-                         KeyValue(key="cpu_ms_mean", value=f"{self.cpu_s / max(self.frames, 1) * 1e3:.2f}"),
-                         KeyValue(key="render_ms_mean", value=f"{self.render_s / max(self.frames, 1) * 1e3:.2f}"),
-                         KeyValue(key="frames_skipped", value=str(self.skipped)),
-                         KeyValue(key="frames_dropped", value=str(self.dropped)),
-                         KeyValue(key="frames_repeated", value=str(self.repeated)),
-                         KeyValue(key="shape_received", value=str(self.shape is not None)),
-                         KeyValue(key="messages_refused", value=str(self.refused))]
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.diag_pub.publish(msg)
+        return level, text, {
+            "frames": self.frames, "frames_per_wall_s": f"{frames / span:.1f}" if span > 0 else "nan",
+            "render_publish_ms": f"{busy / frames * 1e3:.2f}" if frames else "nan",
+            "cpu_ms_mean": f"{self.cpu_s / max(self.frames, 1) * 1e3:.2f}",
+            "render_ms_mean": f"{self.render_s / max(self.frames, 1) * 1e3:.2f}",
+            "frames_skipped": self.skipped, "frames_dropped": self.dropped, "frames_repeated": self.repeated,
+            "shape_received": self.shape is not None, "messages_refused": self.refused,
+            "ready": self.frames > 0}
 
 
 def _interpolate(odom, t: float):

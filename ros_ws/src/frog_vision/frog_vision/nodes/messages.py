@@ -67,3 +67,14 @@ def camera_info_msg(model: CameraModel, stamp: Time, frame_id: str) -> CameraInf
 def model_from_camera_info(msg: CameraInfo) -> CameraModel:
     return CameraModel.from_camera_info(dict(width=msg.width, height=msg.height, k=list(msg.k), d=list(msg.d),
                                              distortion_model=msg.distortion_model, r=list(msg.r), p=list(msg.p)))
+
+
+def planar_covariance(c3) -> list:
+    """6x6 row-major covariance (x, y, z, roll, pitch, yaw) from a planar 3x3 one; the
+    unobserved z, roll and pitch get a large variance."""
+    c = np.zeros((6, 6))
+    idx = [0, 1, 5]
+    c[np.ix_(idx, idx)] = c3
+    for i in (2, 3, 4):
+        c[i, i] = 1e6
+    return [float(v) for v in c.ravel()]

@@ -21,7 +21,6 @@ import threading
 import time
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, PointStamped
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -30,8 +29,9 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from frog_common.settings import from_params
-from soft_robot_common import (ConfigurationError, MessageGate, Param, declare_parameters, params_from_dataclass,
-                                run_node)
+from soft_robot_common import (ConfigurationError, MessageGate, NodeDiagnostics, Param, declare_parameters,
+                               params_from_dataclass, run_node)
+from soft_robot_common.diagnostics import OK
 from soft_robot_interfaces.action import FollowCurve
 from soft_robot_interfaces.srv import ForwardKinematics, SolveIk
 from visualization_msgs.msg import Marker
@@ -106,24 +106,19 @@ class KinematicsNode(Node):
         self._action = ActionServer(self, FollowCurve, "finger/follow_curve", execute_callback=self._execute,
                                     goal_callback=self._goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                     callback_group=group)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self._stats = dict(solves=0, refused=0, last_solve_ms=0.0)
-        self.create_timer(1.0, self._publish_diagnostics)
+        self.diagnostics = NodeDiagnostics(self, "solver", self._diagnostics,
+                                           hardware_id=str(self.kin.mesh.info.get("model", "mesh")))
         if p["publish_shape"]:
             self._publish_shape(self.kin.rest.positions)
         log.info(f"ready in {time.perf_counter() - t0:.1f} s: services finger/solve_ik, finger/forward_kinematics, "
                  f"action finger/follow_curve, targets on finger/target in frame '{self.frame}'")
 
-    def _publish_diagnostics(self) -> None:
-        st = DiagnosticStatus(name=f"{self.get_name()}: solver", level=DiagnosticStatus.OK,
-                              hardware_id=str(self.kin.mesh.info.get("model", "mesh")),
-                              message="trajectory running" if self._trajectory else "ready")
+    def _diagnostics(self):
         vals = dict(self._stats, superseded_targets=self.worker.superseded, vertices=self.kin.mesh.n_vertices,
-                    actuators=",".join(self.kin.names), frame_id=self.frame)
-        st.values = [KeyValue(key=k, value=f"{v:.1f}" if isinstance(v, float) else str(v)) for k, v in vals.items()]
-        arr = DiagnosticArray(status=[st])
-        arr.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(arr)
+                    actuators=",".join(self.kin.names), frame_id=self.frame, ready=True)
+        vals["last_solve_ms"] = f"{vals['last_solve_ms']:.1f}"
+        return OK, "trajectory running" if self._trajectory else "ready", vals
 
     def _on_change(self, changed: dict) -> None:
         self.kin.settings = from_params(IKSettings, self.p)

@@ -129,7 +129,8 @@ class MarlinEmulator(Node):
         from soft_robot_common.diagnostics import OK, WARN
         plugged = self.device.plugged
         values = {"port_link": self.p["port_link"], "device": self.device.device_path if plugged else "",
-                  "lines_received": self.lines_received, "dropped_bytes": self.device.dropped_bytes}
+                  "lines_received": self.lines_received, "dropped_bytes": self.device.dropped_bytes,
+                  "ready": plugged}
         if not plugged:
             return WARN, "unplugged (fault injected): waiting for ~/replug", values
         if self.lines_received == 0:

@@ -28,12 +28,13 @@ import dataclasses
 import time
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from soft_robot_common import ConfigurationError, MessageGate, Param, declare_parameters, namespaced_path, run_node
+from soft_robot_common import (ConfigurationError, MessageGate, NodeDiagnostics, Param, declare_parameters,
+                               namespaced_path, run_node)
+from soft_robot_common.diagnostics import ERROR, OK, WARN
 from soft_robot_common.link_state import LinkState, LinkSupervisor
 from soft_robot_common.serial_link import SerialLink
 from std_srvs.srv import Trigger
@@ -68,8 +69,8 @@ PARAMS = [
 #: a link state as this driver names it (Marlin's kill() is the link's emergency latch)
 LINK_NAMES = {LinkState.DISCONNECTED: "disconnected", LinkState.CONNECTING: "connecting",
               LinkState.READY: "ready", LinkState.EMERGENCY: "halted"}
-LINK_LEVELS = {LinkState.DISCONNECTED: DiagnosticStatus.ERROR, LinkState.CONNECTING: DiagnosticStatus.WARN,
-               LinkState.READY: DiagnosticStatus.OK, LinkState.EMERGENCY: DiagnosticStatus.ERROR}
+LINK_LEVELS = {LinkState.DISCONNECTED: ERROR, LinkState.CONNECTING: WARN,
+               LinkState.READY: OK, LinkState.EMERGENCY: ERROR}
 #: longest text without a line end kept from the board (more is noise)
 MAX_LINE_BYTES = 4096
 #: a write to the board that cannot complete within this is a lost link [s]
@@ -107,14 +108,13 @@ class StepperDriver(Node):
         self._warned_open = False
         self.stats = dict(errors=0, unknown=0, garbage=0, refused=0, moves=0, resets=0, reconnects=0, lost_oks=0)
         self.pub_state = self.create_publisher(JointState, "finger/stepper_state", 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.create_subscription(JointState, "finger/tendon_setpoints", self._on_setpoint,
                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
         self.create_service(Trigger, "~/stop", self._srv_stop)
         self.create_service(Trigger, "~/resume", self._srv_resume)
         # the board runs in real time whatever the node clock: supervision on a steady clock
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
+        self.diagnostics = NodeDiagnostics(self, "Marlin link", self._diagnostics, hardware_id=p["port"])
         self.create_timer(0.02, self._housekeeping, clock=steady)
         # no backoff (the period is the user's), banner_timeout is the settle time, no stall check
         supervisor = LinkSupervisor(p["reconnect_period"], p["reconnect_period"], p["banner_timeout"], 0.0)
@@ -351,12 +351,12 @@ class StepperDriver(Node):
                 self.get_logger().debug(f"sent {line}")
 
     # --- diagnostics / shutdown ---------------------------------------------------------
-    def _publish_diagnostics(self) -> None:
+    def _diagnostics(self):
         link = self.link.snapshot()
         state = "stopped" if self._stopped else LINK_NAMES[link.state]
         if link.state is LinkState.EMERGENCY:
             state = f"halted ({link.emergency_text}): waiting for the board's reset"
-        level = DiagnosticStatus.WARN if self._stopped and link.state is LinkState.READY else LINK_LEVELS[link.state]
+        level = WARN if self._stopped and link.state is LinkState.READY else LINK_LEVELS[link.state]
         vals = dict(port=self.p["port"], link=state, queue_depth=self.sender.queue_depth,
                     in_flight=len(self.sender.in_flight), resends=self.sender.resends, **self.stats,
                     link_losses=link.losses, bytes_read=link.bytes_read, bytes_written=link.bytes_written)
@@ -364,11 +364,8 @@ class StepperDriver(Node):
             vals["last_problem"] = link.last_problem
         if self.reported is not None:
             vals["reported_pull_mm"] = str(np.round(self.map.steps_to_pull(self.reported) * 1e3, 4).tolist())
-        st = DiagnosticStatus(name=f"{self.get_name()}: Marlin link", hardware_id=self.p["port"], level=level,
-                              message=state, values=[KeyValue(key=k, value=str(v)) for k, v in vals.items()])
-        arr = DiagnosticArray(status=[st])
-        arr.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(arr)
+        vals["ready"] = link.state is LinkState.READY and not self._stopped
+        return level, state, vals
 
     def close(self) -> None:
         """Shutdown: quick-stop and disable the motors if the link is up, then close the port.
