@@ -236,3 +236,11 @@ def test_pooled_speed_and_per_seed_spread():
     assert rows[1]["real_speed_rank"] == 2          # 2.7 below 3.0; the tie at 3.0 does not count as below
     text = replay.format_summary(rows, p, groups)
     assert "pooled ellipse (1 runs)" in text and "pooled sin (1 runs)" in text and "pooled all (2 runs)" in text
+
+
+def test_a_missing_figure_is_a_dash_of_the_columns_width_and_alignment():
+    # a run where a seed did not finish has no twin time: its cell keeps the column's width
+    assert replay._fmt(None, 1, "7.1f") == "      -"
+    assert replay._fmt(None, 1, "<8.1f") == "-       "
+    assert replay._fmt(float("nan"), 1, "^5.1f") == "  -  "
+    assert replay._fmt(12.345, 1, "<8.1f") == "12.3    "

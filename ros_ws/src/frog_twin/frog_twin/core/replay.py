@@ -257,7 +257,8 @@ def real_metrics(setup: ReplaySetup, goal_tolerance: float = GOAL_TOLERANCE_M,
 # ------------------------------------------------------------------ tables
 def _fmt(v, scale=1.0, spec="7.2f", signed=False):
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return f"{'-':>{int(spec.split('.')[0])}}"
+        align = spec[0] if spec[:1] in "<>^" else ">"            # the spec's alignment, right by default
+        return format("-", f"{align}{int(spec.lstrip('<>^').split('.')[0])}")
     return format(v * scale, ("+" if signed else "") + spec)
 
 
