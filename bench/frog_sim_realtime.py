@@ -285,7 +285,8 @@ def main() -> None:
         integ = sim.integrator
         ref = NumpyReferenceStepper(integ.network, integ.mass, actuator=integ.actuator,
                                     force_tolerance=integ.force_tolerance, body_damping=integ.body_damping,
-                                    reference=integ.reference)
+                                    reference=integ.reference,
+                                    waterline_friction=getattr(integ, 'waterline_friction', (0.0, 0.0)))
         ref.x[:] = integ.x
         t0 = time.perf_counter()
         c0 = time.process_time()

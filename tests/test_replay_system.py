@@ -36,7 +36,7 @@ def test_short_replay_writes_the_comparison(sin1_run, library, tmp_path):
     shutil.copy(sin1_run.with_name("sin1_path.csv"), path_file)
     out = tmp_path / "replay"
     r = subprocess.run(["frog-twin", "--replay", str(runs / "sin1.csv"), "--path", str(path_file), "--no-vision",
-                        "--direct", "--duration", "6", "--library", str(library), "--out", str(out)],
+                        "--direct", "--duration", "6", "--seeds", "1", "--library", str(library), "--out", str(out)],
                        capture_output=True, text=True, timeout=240)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     folder = out / "sin1"
@@ -59,6 +59,11 @@ def test_short_replay_writes_the_comparison(sin1_run, library, tmp_path):
     # the twin ran the fitted period from the logged start pose along the run's waypoints
     assert res["planner"]["period"] == pytest.approx(setup.period) and 1.40 < setup.period < 1.45
     assert res["planner_kind"] == "project"
+    # without the serial link sim_node fires each primitive the robot's delay after its stamp (simulated
+    # time); the run ends at a 10 cm finish line, as it is scored
+    assert res["robot_loop_params"]["sim_node"]["command_delay_s"] == pytest.approx(0.10)
+    assert res["settings"]["finish_line_m"] == pytest.approx(0.10)
+    assert res["spread"]["mean_distance_m"]["n"] == 1 and res["spread"]["mean_distance_m"]["of"] == 2
     (twin,) = res["twins"]
     rec = read_twin_recording([Path(f) for f in twin["recording"]], with_images=False)
     x0, y0, h0 = setup.start_pose
@@ -84,7 +89,7 @@ def test_short_replay_writes_the_comparison(sin1_run, library, tmp_path):
     # the same replay again into the same folder: the recorder keeps the first file and starts the next;
     # the new report reads only its own (it had read both: every decision twice, two trajectories)
     r = subprocess.run(["frog-twin", "--replay", str(runs / "sin1.csv"), "--path", str(path_file), "--no-vision",
-                        "--direct", "--duration", "6", "--library", str(library), "--out", str(out)],
+                        "--direct", "--duration", "6", "--seeds", "1", "--library", str(library), "--out", str(out)],
                        capture_output=True, text=True, timeout=240)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert "1 earlier recording(s)" in r.stdout, r.stdout[-2000:]

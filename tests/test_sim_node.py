@@ -93,6 +93,39 @@ def test_primitive_moves_the_frog_and_bad_commands_are_rejected(launch, probe):
     assert sim.stop() == 0
 
 
+def test_command_delay_fires_a_primitive_after_its_stamp_in_simulated_time(launch, probe):
+    """command_delay_s 0.8: a primitive stamped t fires at simulated t + 0.8 whatever its arrival (the
+    frog stays exactly at rest before, swims after); one stamped more than 0.8 s ago fires at once and is
+    counted late."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from soft_robot_interfaces.msg import Primitive
+    sim = launch("sim_node", params={"real_time_factor": 0.5, "publish_clock": True, "command_delay_s": 0.8})
+    odom, diags = [], []
+    probe.node.create_subscription(Odometry, "/frog/sim/odom", odom.append, QOS)
+    probe.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
+    prim_pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
+    probe.wait_for_topic("/frog/sim/odom", timeout=120)
+    sim.wait_for_log("simulating the frog", timeout=120)
+    probe.wait_matched(prim_pub)
+    probe.spin_until(lambda: odom, 30, "odometry")
+    last = odom[-1]
+    t0 = _stamp(last)
+    msg = Primitive(id=Primitive.ID_B, name="B")
+    msg.header.stamp = last.header.stamp
+    prim_pub.publish(msg)
+    probe.spin_until(lambda: _stamp(odom[-1]) >= t0 + 1.6, 60, "1.6 simulated seconds")
+    speed = [(_stamp(m) - t0, math.hypot(m.twist.twist.linear.x, m.twist.twist.linear.y)) for m in odom
+             if _stamp(m) >= t0]
+    assert max(v for t, v in speed if t < 0.8 - 1e-6) < 1e-9, "the frog moved before stamp + command_delay_s"
+    assert max(v for t, v in speed if t > 1.2) > 5e-3, "primitive B did not fire 0.8 s after its stamp"
+    late = Primitive(id=Primitive.ID_B, name="B")
+    late.header.stamp.nanosec = 1_000_000          # 1 ms: long before now (a zero stamp means "now")
+    prim_pub.publish(late)
+    probe.spin_until(lambda: any(kv.key == "late_commands" and kv.value == "1" for d in diags for s in d.status
+                                 for kv in s.values), 30, "late_commands 1 in the diagnostics")
+    assert sim.stop() == 0
+
+
 def test_invalid_parameters_exit_with_message(launch):
     sim = launch("sim_node", params={"gait_phase_offset": 1.5})
     assert sim.wait(120) == 2

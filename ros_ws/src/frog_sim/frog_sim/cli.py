@@ -411,7 +411,7 @@ def cmd_disturbance(args):
     bar = None
     if not args.quiet:
         from tqdm import tqdm
-        bar = tqdm(total=(len([k for k in kicks if k > 0]) + len(taus) + 1) * 6 * args.seeds,
+        bar = tqdm(total=(len([k for k in kicks if k > 0]) + len(taus) + 1) * len(hr.HARDWARE_RUNS) * args.seeds,
                    desc='disturbance runs', unit='run')
     t0, c0 = time.perf_counter(), time.process_time()
     fit = df.identify(FrogSimulation(), windows, taus=taus, kick_sds=kicks, seeds=args.seeds,

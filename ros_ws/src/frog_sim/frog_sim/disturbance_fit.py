@@ -1,4 +1,4 @@
-"""Identify the yaw disturbance of the twin from the hardware runs (``frog-sim disturbance``, issue 18).
+"""Identify the yaw disturbance of the twin from the hardware runs (``frog-sim disturbance``).
 
 Target: the robot's residual heading change per period, ``e_k = real_k - sim_k`` (each
 decision replayed for one period from its measured state by the deterministic model,
@@ -33,6 +33,7 @@ REFERENCE_SD = 2.0e-5
 DEFAULT_TAUS = (0.75, 1.0, 1.25, 1.5, 1.75, 2.0)
 DEFAULT_KICK_SDS = (0.0, 0.05, 0.1)
 MAX_LAG = 4
+MAX_RESCALES = 3
 
 
 def autocovariance(series: list, max_lag: int = MAX_LAG) -> tuple[np.ndarray, np.ndarray]:
@@ -188,9 +189,15 @@ def identify(sim, windows, taus=DEFAULT_TAUS, kick_sds=DEFAULT_KICK_SDS, seeds: 
         raise ValueError('every kick spread of the grid alone exceeds the residual variance')
     best = min(grid, key=lambda g: g['score'])
     sd, tau, kick = best['sd'], best['tau'], best['kick_sd']
-    # both on at once, twice the draws, other seeds: sd rescaled to C(0); then a fresh check run
-    both = simulated_residuals(sim, sequences, sd, tau, 2 * seeds, latency, kick_sd=kick, seed=77, progress=progress)
-    sd *= math.sqrt(real_c[0] / autocovariance(both)[0][0])
+    # both on at once, twice the draws, other seeds: sd rescaled to C(0) until within 5 % (the
+    # waterline friction makes the response to a small torque less than linear); then a fresh check run
+    for it in range(MAX_RESCALES):
+        both = simulated_residuals(sim, sequences, sd, tau, 2 * seeds, latency, kick_sd=kick, seed=77 + it,
+                                   progress=progress)
+        ratio = real_c[0] / autocovariance(both)[0][0]
+        sd *= math.sqrt(ratio)
+        if abs(ratio - 1.0) < 0.05:
+            break
     c, _ = autocovariance(simulated_residuals(sim, sequences, sd, tau, 2 * seeds, latency, kick_sd=kick, seed=5077,
                                               progress=progress))
     sim.set_yaw_disturbance(sd, tau, seed=11)

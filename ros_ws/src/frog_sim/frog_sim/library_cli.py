@@ -12,8 +12,8 @@ EPILOG = """examples:
   frog-library generate --states 200 --horizon 3.0 --out runs/lib/small.npz
   frog-library generate --states 8503 --out runs/lib/paper.npz          # paper size, resumable
   frog-library generate --states 8503 --out runs/lib/paper.npz --scheduler tcp://host:8786
-  frog-library generate --states 200 --out runs/lib/issue11.npz --set yaw_damping_linear=0 \\
-      --set surge_damping_linear=0 --set limb_drag_normal=1     # the model before issue 18
+  frog-library generate --states 200 --out runs/lib/no_friction.npz --set waterline_friction=0 \\
+      --set yaw_damping_linear=0.000375 --set surge_damping_linear=0.0483   # the model without waterline friction
   frog-library info runs/lib/small.npz
   frog-library plot runs/lib/small.npz --out runs/lib/small_transitions.png --period 1.5
 

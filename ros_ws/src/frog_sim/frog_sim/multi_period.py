@@ -1,4 +1,4 @@
-"""The robot's own primitive sequences replayed open loop over N periods (issue 18, Deliver 1).
+"""The robot's own primitive sequences replayed open loop over N periods.
 
 Path following lives on several periods: a kick whose turn carries into the next
 periods adds up. For every reconstructed decision ``k`` of a hardware run
@@ -25,7 +25,7 @@ import numpy as np
 from .core import hardware_runs as hr
 from .core.schedules import ActivationSchedule
 
-#: Longest replay [periods] (issue 18: N = 1..5).
+#: Longest replay [periods].
 DEFAULT_N_MAX = 5
 
 
@@ -132,10 +132,17 @@ def replay_report(sim, windows, latency: float, n_max: int = DEFAULT_N_MAX, prog
         if progress:
             progress()
     runs = sorted({w.run for w in windows})
+    groups = sorted({run_group(w.run) for w in windows})
     return {'n_max': n_max, 'latency': latency,
             'pooled': window_metrics(windows, n_max),
+            'groups': {g: window_metrics([w for w in windows if run_group(w.run) == g], n_max) for g in groups},
             'per_run': {run: window_metrics([w for w in windows if w.run == run], n_max) for run in runs},
             'windows': [asdict(w) for w in windows]}
+
+
+def run_group(run: str) -> str:
+    """The group a run is scored in: ``'ellipse'`` (many turning periods in a row) or ``'line/sine'``."""
+    return 'ellipse' if run.startswith('ellipse') else 'line/sine'
 
 
 def format_replay_table(rep: dict) -> str:
@@ -151,6 +158,8 @@ def format_replay_table(rep: dict) -> str:
                          f'{r["abs_heading_ratio"]:10.2f} | {deg * r["rms_heading_error"]:7.1f} deg '
                          f'{1e3 * r["rms_position_error"]:8.1f} mm | {deg * r["real_abs_heading"]:5.1f} deg')
     rows('pooled', rep['pooled'])
+    for group, m in rep.get('groups', {}).items():
+        rows(group, m)
     for run, m in rep['per_run'].items():
         rows(run, m)
     return '\n'.join(lines)

@@ -1,7 +1,8 @@
 """The integrator's force/energy terms as element sets (core/element_sets.py).
 
 Truth: an independent numpy/scipy backward-Euler stepper (core/reference_numpy.py) with
-the body damping of core/body_damping.py added as a lagged force; a term registered
+the body damping of core/body_damping.py and the waterline friction of
+core/waterline_friction.py added as lagged forces; a term registered
 from outside the integrator (explicit: a constant nodal force, which must equal the
 same ``external_force`` exactly; implicit: springs tying each node to its rest position,
 whose static solution under a uniform load is the hand-computed F / k).
@@ -14,6 +15,7 @@ from frog_sim.core.extra_terms import NodalForceTerm, TetherTerm
 from frog_sim.core.integrator import ImplicitEulerIntegrator
 from frog_sim.core.reference_numpy import NumpyReferenceStepper
 from frog_sim.core.rod_network import RodNetworkBuilder
+from frog_sim.core.waterline_friction import waterline_friction
 
 def _rod(n=6):
     b = RodNetworkBuilder()
@@ -24,12 +26,13 @@ def _rod(n=6):
 
 
 def test_body_damping_element_matches_an_independent_numpy_stepper():
-    """Frog, gait, body damping on: the numba step equals a numpy backward Euler whose applied
-    force is body_damping() at the start of each step."""
+    """Frog, gait, body damping and waterline friction on: the numba step equals a numpy backward
+    Euler whose applied force is body_damping() + waterline_friction() at the start of each step."""
     from frog_sim.core.actuation import ActuationLibrary
     from frog_sim.core.model_parameters import FrogParameters
     from frog_sim.core.simulation import FrogSimulation
-    params = FrogParameters(yaw_damping_linear=4e-4, surge_damping_linear=0.03, sway_damping_linear=0.05)
+    params = FrogParameters(yaw_damping_linear=4e-4, surge_damping_linear=0.03, sway_damping_linear=0.05,
+                            waterline_friction=0.008)
     sim = FrogSimulation(params, library=ActuationLibrary.load(), force_tolerance=1e-10)
     sim.set_gait(1.0, 0.5)
     sim.set_velocity(0.02, 0.005, 0.3)
@@ -47,6 +50,8 @@ def test_body_damping_element_matches_an_independent_numpy_stepper():
     h = sim.time_step
     for _ in range(20):
         ref.f_ext, _ = body_damping(ref.x, ref.v, integ.mass, integ.reference, *params_coefficients(params))
+        # F_c = 2 f L_o, N_c = f L_o^2 (L_o = 0.09 m)
+        ref.f_ext = ref.f_ext + waterline_friction(ref.x, ref.v, integ.mass, 2 * 0.008 * 0.09, 0.008 * 0.09 ** 2)[0]
         sim.step(1)
         ref.step(h)
     scale = np.abs(integ.v).max()
@@ -54,7 +59,8 @@ def test_body_damping_element_matches_an_independent_numpy_stepper():
     assert np.abs(ref.x - integ.x).max() < 1e-9
     # and the damping did act: without it (the defaults are calibrated, not zero) the state
     # differs by much more
-    undamped = params.replace(surge_damping_linear=0.0, sway_damping_linear=0.0, yaw_damping_linear=0.0)
+    undamped = params.replace(surge_damping_linear=0.0, sway_damping_linear=0.0, yaw_damping_linear=0.0,
+                              waterline_friction=0.0)
     plain = FrogSimulation(undamped, library=sim.library, force_tolerance=1e-10)
     plain.set_gait(1.0, 0.5)
     plain.set_velocity(0.02, 0.005, 0.3)

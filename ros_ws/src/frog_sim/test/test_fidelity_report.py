@@ -34,14 +34,14 @@ def test_the_model_reproduces_its_own_logs(synthetic_runs, tmp_path, monkeypatch
         assert 0.7 < rep.primitives[p]["dheading"]["ratio"] < 1.3, (p, rep.primitives[p]["dheading"])
     # a kick turns the way its side says: E (left limbs) right, F left
     assert rep.primitives["E"]["dheading"]["sim"]["mean"] < 0 < rep.primitives["F"]["dheading"]["sim"]["mean"]
-    # over several periods too: the logged sequences replayed open loop (issue 18); the windows
+    # over several periods too: the logged sequences replayed open loop; the windows
     # start with the limbs at rest where the log's robot had them in motion, hence 15 %
     for n in (1, 2, 3):
         r = rep.replays["pooled"][n]
         assert r["n"] >= 8 and 0.85 < r["heading_ratio"] < 1.15, (n, r)
     assert rep.replays["pooled"][1]["n"] > rep.replays["pooled"][3]["n"]
     text = format_table(rep)
-    assert "per primitive" in text and "targets (issues 11, 18)" in text and "N-period open-loop" in text
+    assert "per primitive" in text and "targets:" in text and "N-period open-loop" in text
     names = [t[0] for t in targets(rep)]
     assert any("E heading" in n for n in names)
     out = json.loads(rep.to_json())
@@ -51,11 +51,12 @@ def test_the_model_reproduces_its_own_logs(synthetic_runs, tmp_path, monkeypatch
 
 
 def test_turning_matches_the_hardware_runs(measured_file):
-    """Issue 11 targets on the real logs (each primitive from its mean real start state):
-    heading change of C-F within 25 %, B's forward distance within 15 %, E/F side-slip signs."""
+    """The single-period targets on the real logs of all nine runs (each primitive from its mean real
+    start state): heading change of C-F within 25 %, B's forward distance within 15 %, E/F side-slip signs."""
     from frog_sim import calibration as cal
+    from frog_sim.core.hardware_runs import HARDWARE_RUNS
     folder = measured_file("hardware_runs/line1.csv").parent
-    _, targets, _ = cal.read_targets(folder, ("line1", "line2", "sin1", "sin2", "sin3", "sin4"), -5.2)
+    _, targets, _ = cal.read_targets(folder, HARDWARE_RUNS, -5.2)
     obj = cal.JointObjective(targets, [], [], FrogParameters(), speeds=False)
     sim = obj.simulate(FrogParameters())["transitions"]
     for p in "CDEF":

@@ -188,15 +188,17 @@ def test_terminal_velocity_quadratic_drag(direction):
     assert np.abs(v / expected - 1).max() < 0.01
 
 
-@pytest.mark.parametrize("damping", [(0.0, 0.0, 0.0), (0.03, 0.08, 4e-4)])
-def test_numpy_reference_step_matches_numba_step(damping):
+@pytest.mark.parametrize("damping, friction", [((0.0, 0.0, 0.0), 0.0), ((0.03, 0.08, 4e-4), 0.0),
+                                              ((0.03, 0.08, 4e-4), 0.008)])
+def test_numpy_reference_step_matches_numba_step(damping, friction):
     """The benchmark's numpy/scipy baseline computes the same backward-Euler steps, with and
-    without the lumped body damping (written twice: numba kernel, vectorised numpy)."""
+    without the lumped body damping and the waterline friction (each written twice: numba
+    kernel, vectorised numpy)."""
     from frog_sim.core.actuation import ActuationLibrary
     from frog_sim.core.reference_numpy import NumpyReferenceStepper
     from frog_sim.core.simulation import FrogSimulation
     params = FrogParameters().replace(surge_damping_linear=damping[0], sway_damping_linear=damping[1],
-                                      yaw_damping_linear=damping[2])
+                                      yaw_damping_linear=damping[2], waterline_friction=friction)
     sim = FrogSimulation(params, library=ActuationLibrary.load(), force_tolerance=1e-10)
     sim.set_gait(1.0, 0.5)
     sim.set_pose(0.0, 0.0, 0.6)             # surge and sway differ from x and y
@@ -204,7 +206,8 @@ def test_numpy_reference_step_matches_numba_step(damping):
     integ = sim.integrator
     ref = NumpyReferenceStepper(integ.network, integ.mass, actuator=integ.actuator,
                                 force_tolerance=integ.force_tolerance, body_damping=damping,
-                                reference=integ.reference)
+                                reference=integ.reference,
+                                waterline_friction=(2 * friction * 0.09, friction * 0.09 ** 2))
     ref.x[:] = integ.x
     ref.v[:] = integ.v
     h = sim.time_step

@@ -26,6 +26,7 @@ import numpy as np
 
 from frog_planner.core.settings import PathSettings, PlannerSettings, from_arguments
 
+from frog_sim.core.hardware_runs import DECISION_TO_FIRING_S
 from frog_twin.core import replay
 from frog_common.state_age import MAX_STATE_AGE_S
 
@@ -59,6 +60,20 @@ def paper_loop_params(args) -> dict:
     return params
 
 
+def direct_loop_params(args) -> dict:
+    """Node parameters of a replay without the serial link (``--direct``): sim_node fires each
+    primitive the robot's decision-to-firing delay after its stamp, in simulated time (the relay,
+    BLE and firmware the emulator would stand for), so the firing times do not follow the
+    wall-clock latencies of the processes."""
+    return {"sim_node": {"command_delay_s": DECISION_TO_FIRING_S}} if args.direct else {}
+
+
+def finish_line(args) -> float:
+    """Half-width of the replay's finish line [m]: the user's ``--goal-lateral-tolerance`` or
+    :data:`~frog_twin.core.replay.FINISH_LINE_HALF_WIDTH_M`."""
+    return args.path_settings.goal_lateral_tolerance or replay.FINISH_LINE_HALF_WIDTH_M
+
+
 def _merged(first: dict, then: dict) -> dict:
     out = {node: dict(values) for node, values in first.items()}
     for node, values in then.items():
@@ -89,12 +104,15 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
     setup = replay.replay_setup(run_csv, path_csv, None if args.tag_offset_deg is None
                                 else math.radians(args.tag_offset_deg))
     tol = args.path_settings.goal_tolerance
-    real = replay.real_metrics(setup, goal_tolerance=tol)
+    band = finish_line(args)
+    real = replay.real_metrics(setup, goal_tolerance=tol, finish_line=band)
     settings = replay_planner_settings(args, setup.period)
     folder = out / setup.name
     folder.mkdir(parents=True, exist_ok=True)
     waypoints = replay.write_waypoints(setup.path, folder / f"{setup.name}_waypoints.csv")
-    path_settings = dataclasses.replace(args.path_settings, path_type="waypoints", waypoint_file=str(waypoints))
+    # the twin's planner stops at the finish line as the robot's experiment did (and as it is scored)
+    path_settings = dataclasses.replace(args.path_settings, path_type="waypoints", waypoint_file=str(waypoints),
+                                        goal_lateral_tolerance=band)
     duration = args.duration or REPLAY_DURATION_FACTOR * float(setup.time[-1]) + REPLAY_EXTRA_S
     x0, y0, h0 = setup.start_pose
     print(f"replay {progress}{setup.name}: period {setup.period:.4f} s, start ({x0:.3f}, {y0:.3f}) m "
@@ -111,7 +129,8 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
         a = copy.copy(args)
         a.seed = seed
         a.tag_yaw = tag_yaw
-        a.node_params = _merged(paper_loop_params(args), getattr(args, "node_params", {}))   # --node-param last
+        a.node_params = _merged(_merged(paper_loop_params(args), direct_loop_params(args)),
+                                getattr(args, "node_params", {}))   # --node-param last
         label = setup.name if len(args.seed_list) == 1 else f"{setup.name}_s{seed}"
         rec, tm = run_twin(a, label, folder / label, path_settings, setup.start_pose, settings, duration)
         # the run's own window: from the first decision to its end (what the recorder caught while
@@ -121,7 +140,7 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
         truth = rec.truth[(rec.truth[:, 0] >= t0 - 1e-9) & (rec.truth[:, 0] <= t1 + 1e-9)]
         decided = [(t - t0, n) for t, n in rec.primitives if t0 - 1e-9 <= t < t1 - 1e-9]
         m = replay.replay_metrics(truth[:, 0] - t0, truth[:, 1:3], setup.path, [d for d, _ in decided],
-                                  [n for _, n in decided], goal_tolerance=tol)
+                                  [n for _, n in decided], goal_tolerance=tol, finish_line=band)
         m.update(seed=seed, planner_goal_time_s=tm["completion_time_s"], wall_time_s=tm["wall_time_s"],
                  twin_plot=tm["plot"], video=tm["video"], recording=tm["recording"])
         twins.append(m)
@@ -137,14 +156,20 @@ def replay_run(args, run_csv: Path, path_csv: Path | None, out: Path, progress: 
     _write_rows(rows, folder / f"{setup.name}_replay.csv")
     result = {"run": setup.name, "setup": setup.summary(), "planner": dataclasses.asdict(settings),
               "planner_kind": "paper" if args.paper_cost else "project",
-              "robot_loop_params": paper_loop_params(args), "real": real, "twins": twins,
+              "robot_loop_params": _merged(paper_loop_params(args), direct_loop_params(args)),
+              "real": real, "twins": twins, "spread": {
+                  name: replay.seed_spread([t[key] for t in twins], real[key])
+                  for name, key in (("mean_distance_m", "mean_distance_m"),
+                                    ("mean_signed_lateral_m", "mean_signed_lateral_m"),
+                                    ("mean_speed_along_path_m_per_s", "mean_speed_along_path_m_per_s"))},
               "rows": rows, "plot": str(png),
               "settings": {"vision": not args.no_vision, "serial": not args.direct, "seeds": args.seed_list,
                            "real_time_factor": args.real_time_factor, "limb_strength_sd": args.limb_strength_sd,
                            "kick_strength_sd": args.kick_strength_sd, "tag_yaw_rad": tag_yaw,
                            "yaw_disturbance_sd": args.yaw_disturbance_sd,
                            "yaw_disturbance_tau_s": args.yaw_disturbance_tau,
-                           "duration_s": duration, "library": str(args.library)},
+                           "duration_s": duration, "library": str(args.library), "finish_line_m": band,
+                           "goal_tolerance_m": tol},
               "units": {"distance": "m (rows: cm)", "time": "s from the first decision", "speed": "m/s"}}
     (folder / f"{setup.name}_replay.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
     return result
@@ -170,12 +195,14 @@ def main_replay(args, root: Path) -> int:
     for i, (run_csv, path_csv) in enumerate(runs):
         results.append(replay_run(args, run_csv, path_csv, out, progress=f"[{i + 1}/{len(runs)}] "))
     rows = replay.summary_rows(results)
-    pool = replay.pooled(results)
-    text = replay.format_summary(rows, pool)
+    groups = replay.pooled_groups(results)
+    pool = groups["all"]
+    text = replay.format_summary(rows, pool, groups)
     detail = "\n".join(replay.format_rows(r["rows"]) for r in results)
     (out / "summary.txt").write_text(f"planner: {kind}\n{text}\n\nper run and seed:\n{detail}\n")
-    _write_rows(rows + [replay.pooled_row(rows, pool)], out / "summary.csv")
-    (out / "summary.json").write_text(json.dumps({"planner": kind, "rows": rows, "pooled": pool,
+    _write_rows(rows + [replay.pooled_row(rows, p, f"pooled {label}") for label, p in groups.items()],
+                out / "summary.csv")
+    (out / "summary.json").write_text(json.dumps({"planner": kind, "rows": rows, "pooled": pool, "groups": groups,
                                                   "runs": results}, indent=1, default=float) + "\n")
     print(f"\nplanner: {kind}")
     print(text)

@@ -68,6 +68,7 @@ from soft_robot_common.tool_signals import stop_on_signals
 
 from frog_twin.core import twin_report
 from frog_twin.core.cases import PATH_NAMES, path_start_pose, placed_path_settings
+from frog_twin.core.replay import REPLAY_SEEDS
 from frog_twin.core.faults import FaultSpecError, check_against_graph, fault_report, parse_faults
 # the realism defaults of the twin (each switchable; see --help)
 from frog_twin.core.realism import (HARDWARE_PERIOD_S, KICK_STRENGTH_SD, LIMB_STRENGTH_SD, YAW_DISTURBANCE_SD,
@@ -577,8 +578,9 @@ def _main(argv=None) -> int:
                          "tangent heading, relative metric (overrides the depth, weight, look-ahead and correction "
                          "options)")
     rg.add_argument("--seeds", type=int, default=None,
-                    help="twin runs per log with seeds --seed, --seed+1, ... (pooled in the summary); also per "
-                         "case of --fault-campaign and --planner-compare (default 1; 3 for a full --fault-campaign)")
+                    help="twin runs per log with seeds --seed, --seed+1, ... (pooled in the summary; default 5); "
+                         "also per case of --fault-campaign and --planner-compare (default 1; 3 for a full "
+                         "--fault-campaign)")
     rg.add_argument("--tag-offset-deg", type=float, default=None,
                     help="body heading - tag theta [deg] (default: estimated on the folder's line runs)")
     rg.add_argument("--ideal-loop", action="store_true",
@@ -701,7 +703,7 @@ def _main(argv=None) -> int:
         return main_real(ap, args)
     replaying = args.replay is not None or args.replay_all is not None
     if args.seeds is None:         # the campaign: every fault x 3 moments x 3 seeds
-        args.seeds = 3 if args.fault_campaign and not args.fault_classes else 1
+        args.seeds = 3 if args.fault_campaign and not args.fault_classes else REPLAY_SEEDS if replaying else 1
     if args.duration is None and not replaying:
         args.duration = 150.0
     if not (args.real_time_factor > 0 and (args.duration is None or args.duration > 0)

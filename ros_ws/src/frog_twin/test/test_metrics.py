@@ -125,6 +125,33 @@ def test_finish_time_within_tolerance_or_past_the_finish_line():
     assert finish_time(t, short, path) is None
 
 
+def test_the_finish_of_a_path_that_ends_near_its_start():
+    """An ellipse whose end is 2.8 cm from its start (the hardware runs' ellipses, tolerance 3 cm):
+    the start is not the finish, and a robot that passes the end 4 cm outside it has finished
+    there (past the normal at the end), whatever comes after; 12 cm outside, a 10 cm finish line
+    does not count it."""
+    from frog_twin.core.metrics import finish_time, samples_before_finish
+    a = np.linspace(0.0, 2 * np.pi - 0.2, 100)              # end 0.2 rad short of the start: 2.8 cm on r = 0.14
+    path = np.c_[0.14 * np.cos(a), 0.14 * np.sin(a)]
+    assert math.hypot(*(path[0] - path[-1])) == pytest.approx(2 * 0.14 * math.sin(0.1), rel=1e-9)
+    t = np.linspace(0.0, 60.0, 601)
+    ang = np.linspace(0.0, 2 * np.pi + 0.5, 601)            # goes round and on, 0.3 rad past the end
+    for offset, band, finished in ((0.04, None, True), (0.04, 0.10, True), (0.12, 0.10, False)):
+        r = 0.14 + offset
+        xy = np.c_[r * np.cos(ang), r * np.sin(ang)]
+        # first sample past the finish line: the normal through the end to the path's last segment
+        # (on the way round: the start, too, lies beyond that line)
+        k_end = int(np.argmax((ang > np.pi) & ((xy - path[-1]) @ (path[-1] - path[-2]) > 0.0)))
+        assert abs(ang[k_end] - (2 * np.pi - 0.2)) < 0.03
+        got = finish_time(t, xy, path, goal_tolerance=0.03, lateral_tolerance=band)
+        assert (got == pytest.approx(t[k_end])) if finished else got is None, (offset, band, got)
+    xy = np.c_[0.18 * np.cos(ang), 0.18 * np.sin(ang)]
+    past = (ang > np.pi) & ((xy - path[-1]) @ (path[-1] - path[-2]) > 0)
+    assert samples_before_finish(xy, path) == int(np.argmax(past))
+    # standing at the start (2.8 cm from the end) is not having finished
+    assert finish_time(t[:50], np.repeat(path[:1], 50, axis=0), path, goal_tolerance=0.03) is None
+
+
 def test_best_window_rate_counts_frames_in_the_best_whole_window():
     steady = np.arange(0, 5.0, 1 / 15)                       # 15 Hz for 5 s
     assert best_window_rate(steady, 2.0) == pytest.approx(15.0)

@@ -186,5 +186,61 @@ def test_pooled_ratios_over_runs_and_seeds():
     rows = replay.summary_rows(results)
     text = replay.format_summary(rows, replay.pooled(results))
     assert [line.split()[0] for line in text.splitlines()[2:5]] == ["a", "b", "c"]
-    assert "pooled" in text.splitlines()[-1]
+    assert text.splitlines()[-3].startswith("pooled all (3 runs)")
     assert replay.pooled_row(rows, replay.pooled(results))["mean_ratio"] == pytest.approx(0.06 / 0.07)
+
+
+def test_seed_spread_ranks_the_real_run_among_the_seeds():
+    sp = replay.seed_spread([0.03, 0.01, 0.05, 0.02, 0.04], 0.035)
+    assert (sp["median"], sp["min"], sp["max"]) == (0.03, 0.01, 0.05)
+    assert (sp["rank"], sp["of"]) == (4, 6)               # three seeds below 3.5 cm: fourth of six
+    assert replay.seed_spread([0.03, 0.01], 0.001)["rank"] == 1
+    assert replay.seed_spread([0.03, 0.01], 0.1)["rank"] == 3
+    with pytest.raises(ValueError):
+        replay.seed_spread([], 1.0)
+
+
+def _ms(d, lat, v):
+    return dict(_m(d, lat), mean_speed_along_path_m_per_s=v)
+
+
+def test_pooled_speed_and_per_seed_spread():
+    """Two runs, three seeds each: the pooled ratios per seed and their spread, by hand."""
+    results = [
+        {"run": "ellipse1", "real": _ms(0.04, 0.03, 0.020),
+         "twins": [_ms(0.02, 0.01, 0.024), _ms(0.04, 0.02, 0.020), _ms(0.06, 0.04, 0.022)]},
+        {"run": "sin2", "real": _ms(0.02, -0.02, 0.030),
+         "twins": [_ms(0.01, -0.01, 0.030), _ms(0.03, 0.00, 0.036), _ms(0.02, -0.03, 0.027)]},
+    ]
+    p = replay.pooled(results)
+    # speed: seed means 0.022 and 0.031 over real 0.020 + 0.030
+    assert p["mean_speed_ratio_twin_over_real"] == pytest.approx(0.053 / 0.050)
+    # per seed k: distances (0.02+0.01, 0.04+0.03, 0.06+0.02) / 0.06
+    assert p["per_seed"]["mean_distance_ratio"] == pytest.approx([0.5, 7 / 6, 4 / 3])
+    # lateral (both runs > 1 cm off): (0.01 + 0.01, 0.02 + 0.00, 0.04 + 0.03) / 0.05
+    assert p["per_seed"]["signed_lateral_ratio"] == pytest.approx([0.4, 0.4, 1.4])
+    assert p["per_seed"]["mean_speed_ratio"] == pytest.approx([0.054 / 0.05, 0.056 / 0.05, 0.049 / 0.05])
+    assert p["spread"]["mean_distance_ratio"]["median"] == pytest.approx(7 / 6)
+    assert p["spread"]["mean_distance_ratio"]["rank"] == 2      # 1 lies above one seed's 0.5
+    assert p["spread"]["mean_speed_ratio"]["rank"] == 2
+    groups = replay.pooled_groups(results)
+    assert set(groups) == {"all", "ellipse", "sin"}
+    assert groups["ellipse"]["mean_speed_ratio_twin_over_real"] == pytest.approx(0.022 / 0.020)
+    for r in results:
+        r["setup"] = {"period_s": 1.43}
+    rows = replay.summary_rows(results)
+    assert rows[0]["speed_ratio"] == pytest.approx(1.1)
+    assert (rows[0]["twin_mean_median"], rows[0]["twin_mean_min"], rows[0]["twin_mean_max"]) == \
+        pytest.approx((4.0, 2.0, 6.0))
+    assert rows[0]["real_mean_rank"] == 2 and rows[1]["real_lateral_rank"] == 2
+    assert rows[1]["real_speed_rank"] == 2          # 2.7 below 3.0; the tie at 3.0 does not count as below
+    text = replay.format_summary(rows, p, groups)
+    assert "pooled ellipse (1 runs)" in text and "pooled sin (1 runs)" in text and "pooled all (2 runs)" in text
+
+
+def test_a_missing_figure_is_a_dash_of_the_columns_width_and_alignment():
+    # a run where a seed did not finish has no twin time: its cell keeps the column's width
+    assert replay._fmt(None, 1, "7.1f") == "      -"
+    assert replay._fmt(None, 1, "<8.1f") == "-       "
+    assert replay._fmt(float("nan"), 1, "^5.1f") == "  -  "
+    assert replay._fmt(12.345, 1, "<8.1f") == "12.3    "

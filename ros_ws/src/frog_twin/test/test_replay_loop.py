@@ -2,7 +2,8 @@
 import argparse
 
 from frog_common.state_age import MAX_STATE_AGE_S
-from frog_twin.replay_cli import PAPER_REPLAN_INTERVAL_S, _merged, paper_loop_params
+from frog_sim.core.hardware_runs import DECISION_TO_FIRING_S
+from frog_twin.replay_cli import PAPER_REPLAN_INTERVAL_S, _merged, direct_loop_params, paper_loop_params
 
 
 def _args(**kw):
@@ -33,3 +34,13 @@ def test_user_node_params_override_the_loop_and_inputs_stay_unchanged():
                                    "max_state_age_s": PAPER_REPLAN_INTERVAL_S + MAX_STATE_AGE_S}
     assert out["tracker_node"] == {"estimator": "frame_difference"} and out["camera_sim"] == {"fps": 14.0}
     assert loop["planner_node"]["replan_interval"] == PAPER_REPLAN_INTERVAL_S      # not mutated
+
+
+def test_direct_replay_fires_at_the_robots_delay_beside_the_paper_loop():
+    # without the serial link sim_node stands for relay, BLE and firmware: the delay in simulated time
+    assert direct_loop_params(_args(direct=True)) == {"sim_node": {"command_delay_s": DECISION_TO_FIRING_S}}
+    assert direct_loop_params(_args(direct=False)) == {}
+    both = _merged(paper_loop_params(_args(no_vision=True, direct=True)), direct_loop_params(_args(direct=True)))
+    assert both["sim_node"] == {"command_delay_s": DECISION_TO_FIRING_S}
+    assert both["planner_node"]["max_state_age_s"] == PAPER_REPLAN_INTERVAL_S + MAX_STATE_AGE_S
+    assert "bridge_node" not in both

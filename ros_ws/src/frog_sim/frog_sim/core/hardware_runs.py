@@ -38,8 +38,12 @@ import numpy as np
 from frog_common import se2
 from frog_common.primitives import PRIMITIVE_NAMES
 
-#: Runs of ``hardware_runs/`` (README): two lines and four sinusoids.
-HARDWARE_RUNS = ('line1', 'line2', 'sin1', 'sin2', 'sin3', 'sin4')
+#: Runs of ``hardware_runs/`` (README): two lines, four sinusoids and three ellipses.
+HARDWARE_RUNS = ('line1', 'line2', 'sin1', 'sin2', 'sin3', 'sin4', 'ellipse1', 'ellipse3', 'ellipse5')
+#: Decision to firing [s] on the robot: the relay, BLE and firmware (the README's heading starts
+#: to change 0.15-0.2 s after a decision; the SMA's own delay is in the eq. 9 profile). The
+#: replays of its logs fire this long after each decision.
+DECISION_TO_FIRING_S = 0.10
 #: Tag heading offset [rad]: robot heading = theta + offset (README: travel under B is
 #: about -6 deg from theta; re-measured by :func:`estimate_tag_offset`).
 DEFAULT_TAG_OFFSET = np.radians(-6.0)

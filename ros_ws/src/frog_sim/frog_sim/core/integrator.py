@@ -12,8 +12,9 @@ The energy and force terms are element sets (:mod:`~frog_sim.core.element_sets`)
 map plus a numba kernel per term, listed in ``ImplicitEulerIntegrator._element_sets``
 (implicit, inside Newton: stretching E_s and drag f_d on the edges, bending E_b on the
 bend triples) and ``ImplicitEulerIntegrator._explicit_sets`` (lagged: the lumped
-rigid-body damping of :mod:`~frog_sim.core.body_damping`, evaluated at the start of each
-step and added to ``f_ext``, the constant applied force). The inertia term (lumped
+rigid-body damping of :mod:`~frog_sim.core.body_damping` and the waterline friction of
+:mod:`~frog_sim.core.waterline_friction`, evaluated at the start of each step and added to
+``f_ext``, the constant applied force). The inertia term (lumped
 masses M of eq. 4) belongs to the step itself.
 
 Newton (eq. 7) iterates ``x <- x - J \\ F`` from the predictor ``x_k + h v_k`` until
@@ -45,6 +46,7 @@ from numba import literal_unroll, njit
 
 from .actuation import ActuatorArrays, update_actuators
 from .body_damping import BodyDampingTerm
+from .waterline_friction import WaterlineFrictionTerm
 from .elastic_energy import BendTerm, StretchTerm
 from .element_sets import ElementSet, ExplicitSet, add_explicit_set, assemble_element_set, scatter_maps
 from .fluid import DragTerm, drag_prefactors
@@ -332,6 +334,9 @@ class ImplicitEulerIntegrator:
     body_damping : (float, float, float)
         Linear damping (X_u [N s/m], Y_v [N s/m], N_r [N m s/rad]) lumped on the rigid
         body (:mod:`~frog_sim.core.body_damping`); zeros: none.
+    waterline_friction : (float, float)
+        Rate-independent friction (F_c [N], N_c [N m]) against the centre-of-mass velocity and
+        the yaw rate (:mod:`~frog_sim.core.waterline_friction`); zeros: none.
     reference : ndarray, shape (N, 2), optional
         Reference pose centred at its COM (the body axes of surge and sway); default: the
         network's positions about their centre of mass.
@@ -349,7 +354,7 @@ class ImplicitEulerIntegrator:
     def __init__(self, network, mass, *, fluid_density=1000.0, actuator=None, fixed_dofs=(),
                  solver='direct', force_tolerance=1e-9, position_tolerance=1e-11,
                  max_iterations=25, max_halvings=8, reuse_jacobian=True, body_damping=(0.0, 0.0, 0.0),
-                 reference=None):
+                 reference=None, waterline_friction=(0.0, 0.0)):
         if solver not in ('direct', 'superlu'):
             raise ValueError(f"solver = {solver!r}, expected 'direct' or 'superlu'")
         mass = np.asarray(mass, dtype=float)
@@ -405,6 +410,10 @@ class ImplicitEulerIntegrator:
         if coef.shape != (3,) or not np.all(np.isfinite(coef)) or np.any(coef < 0):
             raise ValueError(f'body_damping = {body_damping!r}, expected three finite values >= 0')
         self.body_damping = coef
+        coef = np.asarray(waterline_friction, dtype=float)
+        if coef.shape != (2,) or not np.all(np.isfinite(coef)) or np.any(coef < 0):
+            raise ValueError(f'waterline_friction = {waterline_friction!r}, expected two finite values >= 0')
+        self.waterline_friction = coef
         pos = network.positions.astype(float)
         if reference is None:
             reference = pos - mass @ pos / mass.sum()
@@ -437,9 +446,11 @@ class ImplicitEulerIntegrator:
 
     def _explicit_sets(self):
         """The explicit (lagged) element sets, evaluated at the start of each step and added
-        to ``external_force``: the lumped body damping (``BodyDampingTerm``, one element on
-        all DOFs; off while its coefficients are zero)."""
-        return (ExplicitSet(self._all_dofs, (BodyDampingTerm(self.mass, self.reference, self.body_damping),)),)
+        to ``external_force``: the lumped body damping (``BodyDampingTerm``) and the waterline
+        friction (``WaterlineFrictionTerm``), one element on all DOFs each (each off while its
+        coefficients are zero)."""
+        return (ExplicitSet(self._all_dofs, (BodyDampingTerm(self.mass, self.reference, self.body_damping),
+                                             WaterlineFrictionTerm(self.mass, self.waterline_friction))),)
 
     def _system(self):
         """The current :class:`System` (rebuilt per call: picks up rebound attributes)."""

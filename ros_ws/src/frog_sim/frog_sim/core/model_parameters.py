@@ -15,10 +15,10 @@ connected to three different nodes") and L_i as the length of each limb. This is
 only reading consistent with the paper's node count: at dl = L_o / 23 = 3.91 mm the
 body ring has 92 nodes and each limb adds 9, giving exactly N = 128 (paper: "dl ~ 4 mm
 resulting in N_total = 128 nodes"). H_f and H_a are read as the heights of the front
-and rear sides of the body (issue 11): they set the body's drag (eq. 1) and added mass
+and rear sides of the body: they set the body's drag (eq. 1) and added mass
 (eq. 3) diameter, linear in between along the sides.
 
-Fluid model after issue 11 (``frog-sim fidelity``): the body's sections are its height
+Fluid model (``frog-sim fidelity``): the body's sections are its height
 instead of a 4 mm rod, the limbs are flat strips of a calibrated width, added mass is
 lumped with its direction average, and the sense of the relaxed curl, the front/rear
 root angles and C_bn are jointly calibrated against the hardware transitions and all
@@ -27,9 +27,11 @@ experiment speeds (``frog-sweep calibrate``). ``frog_sim.calibration.LEGACY_MODE
 ``limb_curl_direction='backward'``, ``limb_root_angle_deg=-75``,
 ``front_root_angle_offset_deg=0``, ``body_drag_normal=0.8``) restores the earlier model.
 
-Issue 18 (turns carried into the next periods): a linear damping lumped on the rigid
-body (surge X_u, sway Y_v, yaw N_r; ``core/body_damping.py``) and the limbs' normal drag
-coefficient of a flat strip, calibrated on N = 1..4 period replays of the hardware runs
+Turns over several periods: a linear damping lumped on the rigid body (surge X_u, sway
+Y_v, yaw N_r; ``core/body_damping.py``), the limbs' normal drag coefficient of a flat strip
+and the friction at the waterline (``core/waterline_friction.py``: what stops a turn within
+the period, so that a sustained turn does not gain turn period after period), calibrated on
+N = 1..4 period replays of all nine hardware runs with every other target
 (``frog-sweep calibrate-replays``; record in ``frog_sim/data/replay_calibration.json``).
 """
 from __future__ import annotations
@@ -139,20 +141,20 @@ class FrogParameters(Settings):
     fluid_density: float = setting(WATER_DENSITY,
                                    'density of the water (drag eq. 1, added mass eq. 3); paper: rho_f = 1000',
                                    min=900.0, max=1100.0, unit='kg/m^3')
-    # C_ln (a flat strip normal to the flow; issue 18 calibration; paper 1 for a rod)
+    # C_ln (a flat strip normal to the flow; calibrated on N-period replays; paper 1 for a rod)
     limb_drag_normal: float = setting(2.075,
-                                      'joint calibration on N-period replays (issue 18): 2.075; the limbs are flat '
-                                      'strips (limb_fluid_width) and a flat plate normal to the flow has C_d ~ 2.0 '
-                                      '(Hoerner, Fluid-Dynamic Drag, 1965, ch. 3: 1.98 for a 2D plate; 1.17 for a '
-                                      'square one); paper: C_ln = 1 for a rod',
+                                      'joint calibration on N-period replays (frog-sweep calibrate-replays): 2.075; '
+                                      'the limbs are flat strips (limb_fluid_width) and a flat plate normal to the '
+                                      'flow has C_d ~ 2.0 (Hoerner, Fluid-Dynamic Drag, 1965, ch. 3: 1.98 for a 2D '
+                                      'plate; 1.17 for a square one); paper: C_ln = 1 for a rod',
                                       min=0.0, max=5.0, unit='-')
     # C_lt
     limb_drag_tangent: float = setting(0.01,
                                        "tangential drag coefficient of the limbs (eq. 1); paper: C_lt = 0.01",
                                        min=0.0, max=1.0, unit='-')
-    # C_bn (jointly calibrated with the body's height section, issue 11; paper 0.8 with a 4 mm rod)
+    # C_bn (jointly calibrated with the body's height section; paper 0.8 with a 4 mm rod)
     body_drag_normal: float = setting(0.71,
-                                      'joint calibration (frog-sweep calibrate, issue 11): 0.71 with the body height'
+                                      'joint calibration (frog-sweep calibrate): 0.71 with the body height'
                                       ' section (paper: 0.8 with a 4 mm rod, calibrated on the 10 % runs only)',
                                       min=0.0, max=5.0, unit='-')
     # C_bt
@@ -177,17 +179,19 @@ class FrogParameters(Settings):
     limb_curl_direction: str = setting('forward',
                                        "'forward' = the relaxed curl turns a lateral limb toward the front, i.e. an "
                                        "aft-pointing limb away from the body axis; 'backward' the other way. Not "
-                                       "shown by the paper; joint calibration (issue 11): 'forward' (per-period "
+                                       "shown by the paper; joint calibration (frog-sweep calibrate): 'forward' "
+                                       "(per-period "
                                        "heading changes within 25 % of the robot's), 'backward' (the earlier choice,"
                                        ' from forward speed only) turns about half as much',
                                        choices=('forward', 'backward'), unit='-')
     # limb root direction: 0 lateral, -90 aft, +90 forward
     limb_root_angle_deg: float = setting(-90.0,
-                                         'joint calibration (Fig. 2b gives no angle; issue 11): root direction of '
+                                         'joint calibration (Fig. 2b gives no angle; frog-sweep calibrate): root '
+                                         'direction of '
                                          'the rear limbs, turned from lateral (0) toward the rear: -90 = straight '
                                          'aft (the range bound). Was -75 from forward speed alone',
                                          min=-90.0, max=90.0, unit='deg')
-    # --- fluid sections (issue 11) ---
+    # --- fluid sections ---
     # 'rod': body drag/added mass with body_rod_diameter (the legacy 4 mm rod); 'height': the
     # body's own height, H_f at the front side to H_a at the rear side (Fig. 2b)
     body_fluid_section: str = setting('height',
@@ -196,7 +200,8 @@ class FrogParameters(Settings):
                                       choices=('rod', 'height'), unit='-')
     # projected width of a limb strip normal to the swimming plane (drag eq. 1, added mass eq. 3)
     limb_fluid_width: float = setting(0.030,
-                                      'joint calibration (issue 11): projected width of the flat limb strip normal '
+                                      'joint calibration (frog-sweep calibrate): projected width of the flat limb '
+                                      'strip normal '
                                       'to the plane (Fig. 3a): 30 mm, the upper bound (~ the body height); not given'
                                       ' by the paper (legacy: 4 mm = 2 r)',
                                       min=0.002, max=0.03, unit='m')
@@ -209,18 +214,20 @@ class FrogParameters(Settings):
                                       choices=('normal', 'direction_average'), unit='-')
     # front limbs' root direction relative to the rear limbs' (0: all four alike)
     front_root_angle_offset_deg: float = setting(32.0,
-                                                 'joint calibration (issue 11): front limbs turned by this much '
+                                                 'joint calibration (frog-sweep calibrate): front limbs turned by '
+                                                 'this much '
                                                  'toward the front relative to limb_root_angle_deg: 32 -> front '
                                                  'limbs 58 deg aft of lateral (Fig. 2b gives no angle for either '
                                                  'pair)',
                                                  min=-90.0, max=90.0, unit='deg')
-    # --- linear damping lumped on the rigid body (issue 18; core/body_damping.py) ---
+    # --- linear damping lumped on the rigid body (core/body_damping.py) ---
     # X_u: surge
-    surge_damping_linear: float = setting(0.0483,
+    surge_damping_linear: float = setting(0.05,
                                           'X_u of the linear damping lumped on the rigid body (Fossen D_L; radiation'
-                                          ' damping, meniscus, limb recovery strokes; core/body_damping.py): 0.0483,'
-                                          ' joint calibration on N-period replays and all speeds (issue 18, '
-                                          'frog_sim/data/replay_calibration.json)',
+                                          ' damping, meniscus, limb recovery strokes; core/body_damping.py): 0.05, '
+                                          'joint calibration on N-period replays of the nine hardware runs and all '
+                                          'speeds (frog-sweep calibrate-replays, frog_sim/data/'
+                                          'replay_calibration.json)',
                                           min=0.0, max=1.0, unit='N s/m')
     # Y_v: sway
     sway_damping_linear: float = setting(0.0,
@@ -229,11 +236,22 @@ class FrogParameters(Settings):
                                          min=0.0, max=1.0, unit='N s/m')
     # N_r: yaw
     yaw_damping_linear: float = setting(0.000375,
-                                        'N_r of the same linear damping (yaw), what stops the turn after a kick: '
-                                        '3.75e-4, joint calibration on N-period replays (issue 18): a decay rate N_r'
-                                        " / I = 0.37 1/s (I = 1.0e-3 kg m^2 with the added mass), beside the limbs' "
-                                        'quadratic drag',
+                                        'N_r of the same linear damping (yaw): 3.75e-4, joint calibration on '
+                                        'N-period replays (frog-sweep calibrate-replays): a decay rate N_r / I = '
+                                        "0.37 1/s (I = 1.0e-3 kg m^2 with the added mass), beside the limbs' "
+                                        'quadratic drag and the waterline friction',
                                         min=0.0, max=0.05, unit='N m s/rad')
+
+    # --- friction at the waterline (core/waterline_friction.py) ---
+    # f: contact-line friction per unit length of the body's waterline
+    waterline_friction: float = setting(0.003,
+                                        "contact-angle hysteresis at the waterline, per unit length of the body's "
+                                        'waterline: a rate-independent force 2 f L_o against the swimming and a '
+                                        'torque f L_o^2 against the turn (core/waterline_friction.py), what stops a '
+                                        'turn within the period: 0.003, joint calibration on N-period replays of the '
+                                        'nine hardware runs (frog-sweep calibrate-replays; about 2 deg of contact-'
+                                        'angle hysteresis at 72 mN/m)',
+                                        min=0.0, max=0.05, unit='N/m')
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first value outside its range or choices."""

@@ -33,15 +33,17 @@ class NumpyReferenceStepper:
     ----------
     network, mass, fluid_density, actuator, force_tolerance, position_tolerance, max_iterations
         As :class:`~frog_sim.core.integrator.ImplicitEulerIntegrator`.
-    body_damping, reference
-        As there: the lumped linear damping, held over each step from its start (written
-        again here in vectorised numpy as an independent check of the numba kernel).
+    body_damping, reference, waterline_friction
+        As there: the lumped linear damping and the waterline friction, held over each step
+        from its start (written again here in vectorised numpy as an independent check of
+        the numba kernels).
     """
 
     def __init__(self, network, mass, *, fluid_density=1000.0, actuator=None,
                  force_tolerance=1e-8, position_tolerance=1e-11, max_iterations=25,
-                 body_damping=(0.0, 0.0, 0.0), reference=None):
+                 body_damping=(0.0, 0.0, 0.0), reference=None, waterline_friction=(0.0, 0.0)):
         self.net = network
+        self.waterline_friction = tuple(float(c) for c in waterline_friction)
         self.mass = np.asarray(mass, dtype=float)
         self.body_damping = tuple(float(c) for c in body_damping)
         pos = network.positions.astype(float)
@@ -161,6 +163,22 @@ class NumpyReferenceStepper:
         perp = np.column_stack([-rel[:, 1], rel[:, 0]])
         return (m[:, None] * force / m.sum() + (m * (-nr * r) / inertia)[:, None] * perp).ravel()
 
+    def _waterline_friction(self, x, v):
+        """Coulomb friction (F_c, N_c) against the rigid body's V and r, regularised (core/waterline_friction.py)."""
+        from .waterline_friction import SPEED_SCALE, YAW_RATE_SCALE
+        fc, nc = self.waterline_friction
+        m = self.mass
+        p, u = x.reshape(-1, 2), v.reshape(-1, 2)
+        c, vc = m @ p / m.sum(), m @ u / m.sum()
+        rel, vrel = p - c, u - vc
+        inertia = m @ np.sum(rel ** 2, axis=1)
+        r = m @ (rel[:, 0] * vrel[:, 1] - rel[:, 1] * vrel[:, 0]) / inertia
+        speed = float(np.hypot(*vc))
+        force = -fc * (np.tanh(speed / SPEED_SCALE) / speed if speed > 0 else 1.0 / SPEED_SCALE) * vc
+        torque = -nc * np.tanh(r / YAW_RATE_SCALE)
+        perp = np.column_stack([-rel[:, 1], rel[:, 0]])
+        return (m[:, None] * force / m.sum() + (m * torque / inertia)[:, None] * perp).ravel()
+
     def _system(self, x, x_prev, v_prev, h):
         v = (x - x_prev) / h
         gs, hs = self._stretch(x)
@@ -169,6 +187,8 @@ class NumpyReferenceStepper:
         resid = self.mass2 * (x - x_prev - h * v_prev) / h ** 2
         if any(self.body_damping):
             resid -= self._body_damping(x_prev, v_prev)
+        if any(self.waterline_friction):
+            resid -= self._waterline_friction(x_prev, v_prev)
         resid += np.bincount(self.edof.ravel(), (gs - fd).ravel(), minlength=self.n)
         resid += np.bincount(self.bdof.ravel(), gb.ravel(), minlength=self.n)
         he = hs - jx - jv / h

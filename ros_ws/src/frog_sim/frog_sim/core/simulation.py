@@ -23,6 +23,7 @@ from .rigid_body import HeadingUnwrapper, RigidBodyState, nodal_velocities, rigi
 from frog_common.primitives import LIMB_NAMES
 
 from .schedules import ActivationSchedule
+from .waterline_friction import waterline_friction_coefficients
 from .yaw_disturbance import YawDisturbance, torque_forces
 from frog_common.version import code_version
 
@@ -150,7 +151,9 @@ class FrogSimulation:
             actuator=self._actuator, solver=self._solver, force_tolerance=self._force_tolerance,
             body_damping=(self.params.surge_damping_linear, self.params.sway_damping_linear,
                           self.params.yaw_damping_linear),
-            reference=self.model.reference_pose)
+            reference=self.model.reference_pose,
+            waterline_friction=waterline_friction_coefficients(self.params.waterline_friction,
+                                                               self.params.body_side_length))
         self._schedule = ActivationSchedule.empty()
         self._gait = None
         self._horizon = -np.inf

@@ -54,6 +54,11 @@ _NODE_PARAMS = [
     Param("shape_rate_hz", 10.0, "rate of frog/sim/shape in simulated time [Hz]", min=0.1, max=200.0),
     Param("execute_primitives", True, "execute frog/primitive directly; false when a robot (emulator) fires the "
           "limbs through frog/limb_activation, as in the digital twin"),
+    Param("command_delay_s", 0.0, "fire each executed frog/primitive this long after its stamp in simulated "
+          "time (a zero stamp: after its arrival): the robot's relay, BLE and firmware between a decision and "
+          "its firing, in a loop without the serial link, at the same simulated time whatever the wall-clock "
+          "latencies; a primitive that arrives later than that fires at once (diagnostics late_commands); "
+          "0 = at once [s]", min=0.0, max=5.0),
     Param("odom_alias_topic", "", "also publish the ground truth here (e.g. frog/odom for a vision-free "
           "loop); empty = off"),
     Param("odom_alias_yaw", 0.0, "the alias reports the frame of a tag turned by this yaw on the body [rad] "
@@ -150,6 +155,7 @@ class SimNode(Node):
         self._lag_logged = -math.inf       # wall time of the last lag warning (one per 10 s at most)
         self.steps_total = 0
         self.step_wall_s = 0.0
+        self.late_commands = 0            # primitives that arrived after their stamp + command_delay_s
         self.create_timer(0.01, self.tick)
         self.diagnostics = NodeDiagnostics(self, "simulation", self._diagnostics, hardware_id="frog_sim",
                                            stamp=self._stamp)
@@ -301,8 +307,26 @@ class SimNode(Node):
                                     f"message names {msg.name!r}")
             return
         if self.error is None:
-            self.sim.execute_primitive(name)
-            self.get_logger().debug(f"primitive {name} at t = {self.sim.time:.3f} s")
+            start = self.firing_time(msg.header.stamp)
+            self.sim.execute_primitive(name, start=start)
+            self.get_logger().debug(f"primitive {name} at t = {self.sim.time:.3f} s, fired at "
+                                    f"{self.sim.time if start is None else start:.3f} s")
+
+    def firing_time(self, stamp) -> float | None:
+        """Simulated time [s] to fire a command stamped ``stamp``: ``command_delay_s`` after the stamp
+        (after now for a zero stamp or without simulated stamps), at once if that has passed; None
+        (at once) without a delay."""
+        delay = self.cfg["command_delay_s"]
+        if delay <= 0.0:
+            return None
+        ref = self.sim.time
+        t = stamp.sec + 1e-9 * stamp.nanosec
+        if self.clock_pub is not None and t > 0.0:
+            ref = t - self.world_time_offset
+        if ref + delay < self.sim.time:
+            self.late_commands += 1
+            return self.sim.time
+        return ref + delay
 
     def on_activation(self, msg) -> None:
         limbs = list(msg.limbs)
@@ -349,7 +373,8 @@ class SimNode(Node):
             "sim_time_s": f"{self.sim.time:.3f}", "achieved_real_time_factor": f"{achieved:.2f}",
             "compute_real_time_factor": f"{1 / cost:.1f}" if cost > 0 else "nan", "steps": self.steps_total,
             "lags_dropped": self.pacer.drops, "lag_dropped_s": f"{self.pacer.dropped_total_s:.3f}",
-            "paused": bool(self.cfg["paused"]), "ready": self.error is None}
+            "paused": bool(self.cfg["paused"]), "late_commands": self.late_commands,
+            "ready": self.error is None}
 
 
 def main(args=None) -> int:

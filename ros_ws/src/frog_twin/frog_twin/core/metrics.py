@@ -41,37 +41,86 @@ def signed_lateral_offset(points, path) -> np.ndarray:
     return np.where(cross < 0.0, -1.0, 1.0) * dist[np.arange(len(k)), k]
 
 
-def finish_time(time, positions, path, goal_tolerance: float = 0.03):
-    """When the robot finished the path [s] (same clock as ``time``), or None: the first sample
-    within ``goal_tolerance`` of the path's end, or past the finish line (the normal to the
-    path at its end, see :func:`samples_before_finish`), after the nearest path point has
-    been in the path's second half. Pure geometry, so a real log and a simulated run are
-    timed alike."""
-    t = np.asarray(time, dtype=float)
+def path_progress(positions, path, window: float = 0.3) -> np.ndarray:
+    """Arc length [m] along ``path`` (M, 2) of each sample's closest point, tracked forward.
+
+    Sample by sample, the closest point is searched only on the stretch of ``window`` metres
+    ahead of the previous sample's (from 0 for the first), so the progress never decreases and
+    a path that ends near its start (an ellipse) is not taken for its end at the start, nor for
+    its start at the end. Pure geometry, the same for a real log and a simulated run.
+    """
     pts = np.asarray(positions, dtype=float).reshape(-1, 2)
     ref = np.asarray(path, dtype=float)
-    nearest = np.argmin(np.linalg.norm(pts[:, None, :] - ref[None], axis=-1), axis=1)
-    half_done = np.maximum.accumulate(nearest >= len(ref) // 2)
-    near = np.nonzero(half_done & (np.linalg.norm(pts - ref[-1], axis=1) <= goal_tolerance))[0]
-    crossed = samples_before_finish(pts, ref)
-    first = min(int(near[0]) if len(near) else len(pts), crossed)
-    return float(t[first]) if first < len(pts) else None
+    a, d = ref[:-1], np.diff(ref, axis=0)
+    seg_len = np.linalg.norm(d, axis=1)
+    cum = np.r_[0.0, np.cumsum(seg_len)]
+    out = np.empty(len(pts))
+    s_prev = 0.0
+    for i, p in enumerate(pts):
+        lo = min(max(int(np.searchsorted(cum, s_prev, side="right")) - 1, 0), len(d) - 1)
+        hi = min(int(np.searchsorted(cum, s_prev + window, side="left")), len(d))
+        hi = max(hi, lo + 1)
+        k = np.arange(lo, hi)
+        t = np.einsum("ij,ij->i", p - a[k], d[k]) / np.maximum(seg_len[k] ** 2, 1e-300)
+        s = np.clip(cum[k] + np.clip(t, 0.0, 1.0) * seg_len[k], s_prev, s_prev + window)
+        # the closest point of each segment within the window (its ends clipped to the window)
+        tt = (s - cum[k]) / np.maximum(seg_len[k], 1e-300)
+        dist = np.linalg.norm(a[k] + tt[:, None] * d[k] - p, axis=1)
+        j = int(np.argmin(dist))
+        s_prev = max(s_prev, float(s[j]))
+        out[i] = s_prev
+    return out
+
+
+def finish_index(positions, path, goal_tolerance: float | None = None,
+                 lateral_tolerance: float | None = None) -> int:
+    """Index of the first sample at which the robot has finished the path, or the number of samples.
+
+    Finished: crossing the finish line, the normal through the path's end to its last segment,
+    once the tracked progress (:func:`path_progress`) has reached the end, within
+    ``lateral_tolerance`` of the end along that line at the crossing (None: anywhere; a robot
+    that crosses wide and drifts into the band afterwards has not finished there, as the
+    planner's goal test); or, with ``goal_tolerance``, within that distance of the end once the
+    tracked progress has passed half the path.
+    """
+    pts = np.asarray(positions, dtype=float).reshape(-1, 2)
+    ref = np.asarray(path, dtype=float)
+    s = path_progress(pts, ref)
+    length = float(np.sum(np.linalg.norm(np.diff(ref, axis=0), axis=1)))
+    tangent = ref[-1] - ref[-2]
+    tangent = tangent / np.linalg.norm(tangent)
+    rel = pts - ref[-1]
+    along = rel @ tangent
+    lateral = rel[:, 1] * tangent[0] - rel[:, 0] * tangent[1]
+    done = np.zeros(len(pts), dtype=bool)
+    crossing = np.r_[False, (along[:-1] <= 0.0) & (along[1:] > 0.0)] & (s >= length - 1e-9)
+    if lateral_tolerance is None:
+        done |= crossing
+    else:
+        for i in np.nonzero(crossing)[0]:       # the lateral offset where the step crossed the line
+            w = -along[i - 1] / (along[i] - along[i - 1])
+            done[i] = abs(lateral[i - 1] + w * (lateral[i] - lateral[i - 1])) <= lateral_tolerance
+    if goal_tolerance is not None:
+        done |= (s >= 0.5 * length) & (np.linalg.norm(rel, axis=1) <= goal_tolerance)
+    hits = np.nonzero(done)[0]
+    return int(hits[0]) if len(hits) else len(pts)
+
+
+def finish_time(time, positions, path, goal_tolerance: float = 0.03, lateral_tolerance: float | None = None):
+    """When the robot finished the path [s] (same clock as ``time``), or None: the first sample
+    within ``goal_tolerance`` of the path's end after half the path, or past the finish line
+    (within ``lateral_tolerance`` of the end along it; None: anywhere), see
+    :func:`finish_index`. Pure geometry, so a real log and a simulated run are timed alike."""
+    t = np.asarray(time, dtype=float)
+    first = finish_index(positions, path, goal_tolerance, lateral_tolerance)
+    return float(t[first]) if first < len(t) else None
 
 
 def samples_before_finish(positions, path_points) -> int:
     """Number of samples before the robot crosses the finish line (the normal to the path
-    at its end) on its final approach: past it, the distance to the polyline measures
-    overshoot beyond the goal, not tracking. The final approach starts once the nearest
-    path point has been in the second half of the path (so a closed-ish path's start,
-    next to its end, does not count)."""
-    pts = np.asarray(positions, dtype=float)
-    ref = np.asarray(path_points, dtype=float)
-    nearest = np.argmin(np.linalg.norm(pts[:, None, :] - ref[None], axis=-1), axis=1)
-    half_done = np.maximum.accumulate(nearest >= len(ref) // 2)
-    tangent = ref[-1] - ref[-2]
-    past = half_done & (nearest >= len(ref) - 3) & ((pts - ref[-1]) @ tangent > 0)
-    hits = np.nonzero(past)[0]
-    return int(hits[0]) if len(hits) else len(pts)
+    at its end) on its final approach, :func:`finish_index` at any lateral distance: past it,
+    the distance to the polyline measures overshoot beyond the goal, not tracking."""
+    return finish_index(positions, path_points)
 
 
 def arc_length_progress(points, path) -> np.ndarray:

@@ -39,6 +39,13 @@ from frog_common.se2 import wrap_angle
 POOL_MIN_REAL_OFFSET_M = 0.01
 #: Goal tolerance of the geometric finish (the planner's default goal_tolerance) [m].
 GOAL_TOLERANCE_M = 0.03
+#: Half-width of the finish line [m]: a run that crosses the normal at the path's end within
+#: this distance of the end has reached the end and ends there, as the robot's experiments did
+#: (the operator stopped them at the end of the path), even when it missed the goal tolerance;
+#: the twin's planner stops there too (its ``goal_lateral_tolerance`` in a replay).
+FINISH_LINE_HALF_WIDTH_M = 0.10
+#: Seeds per replay unless given: enough to say where the real run falls in the twin's spread.
+REPLAY_SEEDS = 5
 
 
 @dataclass
@@ -211,13 +218,15 @@ def replay_setup(run_csv: Path | str, path_csv: Path | str | None = None,
 
 
 def replay_metrics(time, positions, path, decision_times, primitives,
-                   goal_tolerance: float = GOAL_TOLERANCE_M) -> dict:
+                   goal_tolerance: float = GOAL_TOLERANCE_M,
+                   finish_line: float | None = FINISH_LINE_HALF_WIDTH_M) -> dict:
     """The replay table's figures of one trajectory, real or simulated (SI units).
 
     ``time`` [s] from the first decision, ``positions`` (N, 2) the body (centre of mass)
     positions, ``decision_times``/``primitives`` the decisions. The run ends at the
-    geometric finish (:func:`~frog_twin.core.metrics.finish_time`) or at its last sample;
-    the primitives counted are those decided before the end.
+    geometric finish (:func:`~frog_twin.core.metrics.finish_time`: within ``goal_tolerance`` of
+    the end, or across the finish line within ``finish_line`` of the end; None: anywhere) or
+    at its last sample; the primitives counted are those decided before the end.
 
     Returns
     -------
@@ -228,7 +237,7 @@ def replay_metrics(time, positions, path, decision_times, primitives,
     """
     t = np.asarray(time, dtype=float)
     xy = np.asarray(positions, dtype=float).reshape(-1, 2)
-    goal = finish_time(t, xy, path, goal_tolerance)
+    goal = finish_time(t, xy, path, goal_tolerance, finish_line)
     end = goal if goal is not None else float(t[-1])
     prims = [p for td, p in zip(decision_times, primitives) if td < end - 1e-9]
     m = tracking_metrics(t, xy, path, goal_time=goal, primitives=prims)
@@ -238,16 +247,18 @@ def replay_metrics(time, positions, path, decision_times, primitives,
     return m
 
 
-def real_metrics(setup: ReplaySetup, goal_tolerance: float = GOAL_TOLERANCE_M) -> dict:
+def real_metrics(setup: ReplaySetup, goal_tolerance: float = GOAL_TOLERANCE_M,
+                 finish_line: float | None = FINISH_LINE_HALF_WIDTH_M) -> dict:
     """:func:`replay_metrics` of the real robot's run."""
     return replay_metrics(setup.time, setup.pose[:, :2], setup.path, setup.decision_times, setup.primitives,
-                          goal_tolerance)
+                          goal_tolerance, finish_line)
 
 
 # ------------------------------------------------------------------ tables
 def _fmt(v, scale=1.0, spec="7.2f", signed=False):
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return f"{'-':>{int(spec.split('.')[0])}}"
+        align = spec[0] if spec[:1] in "<>^" else ">"            # the spec's alignment, right by default
+        return format("-", f"{align}{int(spec.lstrip('<>^').split('.')[0])}")
     return format(v * scale, ("+" if signed else "") + spec)
 
 
@@ -291,7 +302,12 @@ def pooled(results: list[dict], min_real_offset: float = POOL_MIN_REAL_OFFSET_M)
       |real offset|: 1 = the twin is off to the same side by as much; < 0 = the other side.
       ``signed_lateral_ratio_se`` is its standard error from the twin's seed-to-seed spread,
       sqrt(sum of s_i^2 / n_i) / sum of |real offset| (s_i the sample sd over run i's n_i seeds;
-      None below 2 seeds a run): the robot ran each path once, so that is all the spread known.
+      None below 2 seeds a run): the robot ran each path once, so that is all the spread known;
+    - mean speed along the path: (mean over runs of the seed-mean twin speed) / (mean over runs
+      of the real speed), ``mean_speed_ratio_twin_over_real``;
+    - ``per_seed``: the same three ratios with each run's k-th seed alone (k up to the fewest
+      seeds of a run), and ``spread``: their median, range and the real run's rank among them
+      (:func:`seed_spread`; the real pooled figure is 1 by definition).
     """
     real_d = [r["real"]["mean_distance_m"] for r in results]
     twin_d = [float(np.mean([t["mean_distance_m"] for t in r["twins"]])) for r in results]
@@ -301,14 +317,65 @@ def pooled(results: list[dict], min_real_offset: float = POOL_MIN_REAL_OFFSET_M)
     den = sum(abs(r["real"]["mean_signed_lateral_m"]) for r in sel)
     se = _ratio_se([[t["mean_signed_lateral_m"] for t in r["twins"]] for r in sel], den)
     se_d = _ratio_se([[t["mean_distance_m"] for t in r["twins"]] for r in results], float(np.sum(real_d)))
-    return {"runs": len(results), "seeds_per_run": [len(r["twins"]) for r in results],
+    speed = "mean_speed_along_path_m_per_s"
+    real_v = [r["real"][speed] for r in results]
+    twin_v = [float(np.mean([t[speed] for t in r["twins"]])) for r in results]
+    per_seed = {"mean_distance_ratio": [], "signed_lateral_ratio": [], "mean_speed_ratio": []}
+    for k in range(min((len(r["twins"]) for r in results), default=0)):
+        per_seed["mean_distance_ratio"].append(sum(r["twins"][k]["mean_distance_m"] for r in results)
+                                               / float(np.sum(real_d)))
+        if den > 0:
+            per_seed["signed_lateral_ratio"].append(
+                sum(r["twins"][k]["mean_signed_lateral_m"] * math.copysign(1.0, r["real"]["mean_signed_lateral_m"])
+                    for r in sel) / den)
+        per_seed["mean_speed_ratio"].append(sum(r["twins"][k][speed] for r in results) / float(np.sum(real_v)))
+    return {"runs": len(results), "run_names": [r["run"] for r in results],
+            "seeds_per_run": [len(r["twins"]) for r in results],
             "mean_distance_real_m": float(np.mean(real_d)) if real_d else None,
             "mean_distance_twin_m": float(np.mean(twin_d)) if twin_d else None,
             "mean_distance_ratio_twin_over_real": float(np.sum(twin_d) / np.sum(real_d)) if real_d else None,
             "mean_distance_ratio_se": se_d,
             "lateral_runs": [r["run"] for r in sel], "lateral_min_real_offset_m": min_real_offset,
             "signed_lateral_ratio_twin_over_real": num / den if den > 0 else None,
-            "signed_lateral_ratio_se": se}
+            "signed_lateral_ratio_se": se,
+            "mean_speed_real_m_per_s": float(np.mean(real_v)) if real_v else None,
+            "mean_speed_twin_m_per_s": float(np.mean(twin_v)) if twin_v else None,
+            "mean_speed_ratio_twin_over_real": float(np.sum(twin_v) / np.sum(real_v)) if real_v else None,
+            "per_seed": per_seed,
+            "spread": {k: seed_spread(v, 1.0) for k, v in per_seed.items() if v}}
+
+
+def seed_spread(values, real: float) -> dict:
+    """The twin's seeds beside the real figure: median, range and the real one's rank.
+
+    ``rank`` is 1 + the number of seeds below ``real`` (ties count as not below), out of
+    ``of`` = seeds + 1: 1 = the real run lies at or below every seed, ``of`` = above all.
+
+    Examples
+    --------
+    >>> seed_spread([1.0, 3.0, 2.0, 5.0, 4.0], 3.5)["rank"]
+    4
+    """
+    v = np.asarray(list(values), dtype=float)
+    if v.size == 0:
+        raise ValueError("seed_spread needs at least one seed's value")
+    return {"median": float(np.median(v)), "min": float(v.min()), "max": float(v.max()),
+            "rank": int(np.sum(v < real)) + 1, "of": int(v.size) + 1, "n": int(v.size)}
+
+
+def run_kind(name: str) -> str:
+    """The kind of path a run name says (``ellipse3`` -> ``ellipse``, ``sin4`` -> ``sin``)."""
+    return name.rstrip("0123456789_-") or name
+
+
+def pooled_groups(results: list[dict], min_real_offset: float = POOL_MIN_REAL_OFFSET_M) -> dict:
+    """:func:`pooled` over all runs (``"all"``) and over the runs of each kind (:func:`run_kind`)."""
+    out = {"all": pooled(results, min_real_offset)}
+    for kind in sorted({run_kind(r["run"]) for r in results}):
+        sub = [r for r in results if run_kind(r["run"]) == kind]
+        if len(sub) < len(results):
+            out[kind] = pooled(sub, min_real_offset)
+    return out
 
 
 def _ratio_se(seeds: list[list[float]], den: float) -> float | None:
@@ -319,14 +386,16 @@ def _ratio_se(seeds: list[list[float]], den: float) -> float | None:
 
 
 def summary_rows(results: list[dict]) -> list[dict]:
-    """One row per run (real beside the seed-mean twin) for ``--replay-all``."""
+    """One row per run for ``--replay-all``: the real figure beside the twin's seed mean, and for
+    the mean distance, the signed lateral offset and the mean speed along the path the seeds'
+    median, range and the real run's rank among them (:func:`seed_spread`)."""
     rows = []
     for r in results:
         tw = r["twins"]
         mean = lambda key: float(np.mean([t[key] for t in tw]))   # noqa: E731
         times = [t["completion_time_s"] for t in tw if t["completion_time_s"] is not None]
         real = r["real"]
-        rows.append({
+        row = {
             "run": r["run"], "seeds": len(tw), "period_s": r["setup"]["period_s"],
             "real_mean_cm": 100 * real["mean_distance_m"], "twin_mean_cm": 100 * mean("mean_distance_m"),
             "mean_ratio": mean("mean_distance_m") / real["mean_distance_m"],
@@ -337,22 +406,34 @@ def summary_rows(results: list[dict]) -> list[dict]:
                               if real["mean_signed_lateral_m"] != 0 else None),
             "real_time_s": real["completion_time_s"],
             "twin_time_s": float(np.mean(times)) if len(times) == len(tw) else None,
+            "real_finished": real["finished"],
             "twin_finished": f"{sum(t['finished'] for t in tw)}/{len(tw)}",
             "real_speed_cm_per_s": 100 * real["mean_speed_along_path_m_per_s"],
             "twin_speed_cm_per_s": 100 * mean("mean_speed_along_path_m_per_s"),
+            "speed_ratio": (mean("mean_speed_along_path_m_per_s") / real["mean_speed_along_path_m_per_s"]
+                            if real["mean_speed_along_path_m_per_s"] > 0 else None),
             "real_primitives": _hist(real["primitives_used"]),
             "twin_primitives": _hist(_sum_hist([t["primitives_used"] for t in tw])),
-        })
+        }
+        for name, key, scale in (("mean", "mean_distance_m", 100), ("lateral", "mean_signed_lateral_m", 100),
+                                 ("speed", "mean_speed_along_path_m_per_s", 100)):
+            sp = seed_spread([scale * t[key] for t in tw], scale * real[key])
+            row.update({f"twin_{name}_median": sp["median"], f"twin_{name}_min": sp["min"],
+                        f"twin_{name}_max": sp["max"], f"real_{name}_rank": sp["rank"]})
+        rows.append(row)
     return rows
 
 
-def pooled_row(rows: list[dict], pool: dict) -> dict:
+def pooled_row(rows: list[dict], pool: dict, label: str = "pooled") -> dict:
     """The pooled figures as one more row of :func:`summary_rows` (CSV); other columns empty."""
     row = {k: None for k in rows[0]}
-    row.update(run="pooled", seeds=sum(pool["seeds_per_run"]),
+    row.update(run=label, seeds=sum(pool["seeds_per_run"]),
                real_mean_cm=100 * pool["mean_distance_real_m"], twin_mean_cm=100 * pool["mean_distance_twin_m"],
                mean_ratio=pool["mean_distance_ratio_twin_over_real"],
-               lateral_ratio=pool["signed_lateral_ratio_twin_over_real"])
+               lateral_ratio=pool["signed_lateral_ratio_twin_over_real"],
+               real_speed_cm_per_s=100 * pool["mean_speed_real_m_per_s"],
+               twin_speed_cm_per_s=100 * pool["mean_speed_twin_m_per_s"],
+               speed_ratio=pool["mean_speed_ratio_twin_over_real"])
     return row
 
 
@@ -369,32 +450,61 @@ def _pm(se: float | None, note: str = "") -> str:
     return "" if se is None else f" +- {se:.2f}{note}"
 
 
-def format_summary(rows: list[dict], pool: dict) -> str:
-    """Text of the ``--replay-all`` table with its pooled row."""
-    head = (f"{'run':8s} {'P s':>5} {'seeds':>5} {'mean cm real/twin':>17} {'ratio':>5} {'max cm real/twin':>16} "
-            f"{'lateral cm real/twin':>20} {'ratio':>5} {'time s real/twin':>16} {'cm/s real/twin':>14}  "
-            "primitives real | twin")
+def _spread_text(median, lo, hi, rank, of, spec=".2f") -> str:
+    return f"{median:{spec}} [{lo:{spec}}, {hi:{spec}}] {rank}/{of}"
+
+
+def format_summary(rows: list[dict], pool: dict, groups: dict | None = None) -> str:
+    """Text of the ``--replay-all`` table: per run the real figure, the twin's seed median
+    [range] and the real run's rank among the seeds (1 = below every seed), the seed-mean
+    ratio; then the pooled ratios (all runs, and per kind of path in ``groups``) with the
+    per-seed pooled ratios' median [range] and where 1 (the real) ranks among them."""
+    head = (f"{'run':8s} {'P s':>5} {'seeds':>5} | {'mean cm: real':>13} {'twin med [range] rank':>24} {'ratio':>5} | "
+            f"{'lateral cm: real':>16} {'twin med [range] rank':>26} {'ratio':>5} | "
+            f"{'cm/s: real':>10} {'twin med [range] rank':>22} {'ratio':>5} | {'time s real/twin':>16} "
+            f"{'finished real/twin':>18}  primitives real | twin")
     out = [head, "-" * len(head)]
     for r in rows:
+        def spread(name, spec=".2f"):
+            return _spread_text(r[f"twin_{name}_median"], r[f"twin_{name}_min"], r[f"twin_{name}_max"],
+                                r[f"real_{name}_rank"], r["seeds"] + 1, spec)
         out.append(
-            f"{r['run']:8s} {r['period_s']:5.3f} {r['seeds']:5d} "
-            f"{r['real_mean_cm']:8.2f}/{r['twin_mean_cm']:<8.2f} {r['mean_ratio']:5.2f} "
-            f"{r['real_max_cm']:7.2f}/{r['twin_max_cm']:<8.2f} "
-            f"{r['real_lateral_cm']:+9.2f}/{r['twin_lateral_cm']:<+10.2f} {_fmt(r['lateral_ratio'], 1, '5.2f')} "
+            f"{r['run']:8s} {r['period_s']:5.3f} {r['seeds']:5d} | {r['real_mean_cm']:13.2f} "
+            f"{spread('mean'):>24} {r['mean_ratio']:5.2f} | {r['real_lateral_cm']:+16.2f} "
+            f"{spread('lateral', '+.2f'):>26} "
+            f"{_fmt(r['lateral_ratio'], 1, '5.2f')} | {r['real_speed_cm_per_s']:10.2f} "
+            f"{spread('speed'):>22} "
+            f"{_fmt(r['speed_ratio'], 1, '5.2f')} | "
             f"{_fmt(r['real_time_s'], 1, '7.1f')}/{_fmt(r['twin_time_s'], 1, '<8.1f')} "
-            f"{r['real_speed_cm_per_s']:6.2f}/{r['twin_speed_cm_per_s']:<7.2f}  "
+            f"{'yes' if r.get('real_finished', True) else 'no':>12}/{r['twin_finished']:<5}  "
             f"{r['real_primitives']} | {r['twin_primitives']}")
     out.append("-" * len(head))
+    for label, p in ((("all", pool),) if groups is None else tuple(groups.items())):
+        out.extend(format_pooled(p, label))
+    return "\n".join(out)
+
+
+def format_pooled(pool: dict, label: str = "all") -> list[str]:
+    """Lines of one pooled block (see :func:`format_summary`)."""
+    spread = pool.get("spread", {})
+
+    def sp(key):
+        x = spread.get(key)
+        return "" if not x else (f"; per seed {x['median']:.2f} [{x['min']:.2f}, {x['max']:.2f}], "
+                                 f"real (1) ranks {x['rank']}/{x['of']}")
     ratio = pool["mean_distance_ratio_twin_over_real"]
     lat = pool["signed_lateral_ratio_twin_over_real"]
-    out.append(f"{'pooled':8s} mean distance real {_fmt(pool['mean_distance_real_m'], 100, '.2f')} cm, "
-               f"twin {_fmt(pool['mean_distance_twin_m'], 100, '.2f')} cm, twin/real {_fmt(ratio, 1, '.2f')}"
-               f"{_pm(pool.get('mean_distance_ratio_se'))}; "
-               f"signed lateral offset twin/real {_fmt(lat, 1, '.2f')}"
-               f"{_pm(pool.get('signed_lateral_ratio_se'), ' (se, seed spread)')} over "
-               f"{', '.join(pool['lateral_runs']) or 'no run'} (real |offset| > "
-               f"{100 * pool['lateral_min_real_offset_m']:.0f} cm)")
-    return "\n".join(out)
+    name = f"pooled {label} ({pool['runs']} runs)"
+    return [f"{name}: mean distance real {_fmt(pool['mean_distance_real_m'], 100, '.2f')} cm, "
+            f"twin {_fmt(pool['mean_distance_twin_m'], 100, '.2f')} cm, twin/real {_fmt(ratio, 1, '.2f')}"
+            f"{_pm(pool.get('mean_distance_ratio_se'))}{sp('mean_distance_ratio')}",
+            f"{'':{len(name)}}  signed lateral offset twin/real {_fmt(lat, 1, '.2f')}"
+            f"{_pm(pool.get('signed_lateral_ratio_se'), ' (se, seed spread)')} over "
+            f"{', '.join(pool['lateral_runs']) or 'no run'} (real |offset| > "
+            f"{100 * pool['lateral_min_real_offset_m']:.0f} cm){sp('signed_lateral_ratio')}",
+            f"{'':{len(name)}}  mean speed along the path real {_fmt(pool.get('mean_speed_real_m_per_s'), 100, '.2f')} "
+            f"cm/s, twin {_fmt(pool.get('mean_speed_twin_m_per_s'), 100, '.2f')} cm/s, twin/real "
+            f"{_fmt(pool.get('mean_speed_ratio_twin_over_real'), 1, '.2f')}{sp('mean_speed_ratio')}"]
 
 
 # ------------------------------------------------------------------ plot
