@@ -542,8 +542,8 @@ def test_end_to_end_primitive_moves_the_simulated_frog(launch, probe, tmp_path):
 def test_shutdown_between_front_and_rear_sends_no_rear(launch, probe, tmp_path):
     from soft_robot_interfaces.msg import Primitive
     # a 300 ms pulse leaves time to stop the bridge between the two lines of B
-    emu, bridge, log = start_pair(launch, probe, tmp_path, bridge_params={"pulse_ms": 300},
-                                  emulator_params={"imu_rate_hz": 0.0})
+    emu, bridge, log = start_pair(launch, probe, tmp_path, bridge_params={"pulse_ms": 300, "max_state_age_s": 2.0},
+                                  emulator_params={"imu_rate_hz": 0.0})   # rear due 300 ms on: not an age test
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     publisher_ready(probe, pub)
     publish_primitive(probe, pub, "B")
@@ -559,8 +559,8 @@ def test_shutdown_between_front_and_rear_sends_no_rear(launch, probe, tmp_path):
 def test_frog_stop_cancels_the_pending_pulse_and_latches_until_cleared(launch, probe, tmp_path):
     from soft_robot_interfaces.msg import Primitive
     from std_msgs.msg import Empty
-    emu, bridge, log = start_pair(launch, probe, tmp_path, bridge_params={"pulse_ms": 300},
-                                  emulator_params={"imu_rate_hz": 0.0})
+    emu, bridge, log = start_pair(launch, probe, tmp_path, bridge_params={"pulse_ms": 300, "max_state_age_s": 2.0},
+                                  emulator_params={"imu_rate_hz": 0.0})   # rear due 300 ms on: not an age test
     pub = probe.node.create_publisher(Primitive, "/frog/primitive", QOS)
     stop = probe.node.create_publisher(Empty, "/frog/stop", QOS)
     publisher_ready(probe, pub)
