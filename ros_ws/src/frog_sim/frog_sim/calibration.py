@@ -1,4 +1,4 @@
-"""Joint calibration of the few free model parameters (issue 11, Deliver 4).
+"""Joint calibration of the few free model parameters.
 
 Objective
 ---------
@@ -48,9 +48,9 @@ from .core.simulation import DEFAULT_TIME_STEP, FrogSimulation
 
 TURN_PRIMITIVES = ('C', 'D', 'E', 'F')
 SLIP_PRIMITIVES = ('E', 'F')
-#: The physics of issue 11 that the calibration starts from (docs/results.md, "Simulator fidelity").
+#: The physics that the calibration starts from (docs/results.md, "Simulator fidelity").
 PHYSICAL_BASE = {'body_fluid_section': 'height', 'added_mass_lumping': 'direction_average'}
-#: The model before issue 11 (4 mm body rod, 4 mm limbs, paper's lumping, one root angle).
+#: The model before the joint calibration (4 mm body rod, 4 mm limbs, paper's lumping, one root angle).
 LEGACY_MODEL = {'body_fluid_section': 'rod', 'added_mass_lumping': 'normal', 'limb_fluid_width': 0.004,
                 'limb_root_angle_deg': -75.0, 'front_root_angle_offset_deg': 0.0, 'body_drag_normal': 0.8,
                 'limb_curl_direction': 'backward'}

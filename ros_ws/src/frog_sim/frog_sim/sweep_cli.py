@@ -89,7 +89,7 @@ def _fmt_values(values: dict) -> str:
 
 
 def cmd_calibrate_joint(args) -> int:
-    """Joint calibration (issue 11): grid on the kick geometry, Nelder-Mead with the speeds."""
+    """Joint calibration: grid on the kick geometry, Nelder-Mead with the speeds."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -1,4 +1,4 @@
-"""Shared fixtures of the frog_sim tests: measured data are optional (issue 10).
+"""Shared fixtures of the frog_sim tests: measured data are optional.
 
 Tests that compare against the authors' measurements get them through ``measured_file``;
 in a clone without ``FROG_DATA_DIR`` / ``shared/data/frog`` they skip with a reason that

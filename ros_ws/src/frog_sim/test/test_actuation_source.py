@@ -1,4 +1,4 @@
-"""Where the eq. 9 coefficients come from (issue 10): the shipped fit, refits, mismatches."""
+"""Where the eq. 9 coefficients come from: the shipped fit, refits, mismatches."""
 import csv
 import json
 

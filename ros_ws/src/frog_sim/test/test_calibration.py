@@ -1,4 +1,4 @@
-"""Joint calibration (issue 11, Deliver 4): objective terms by hand and a known-answer search."""
+"""Joint calibration: objective terms by hand and a known-answer search."""
 import pytest
 
 from frog_sim import calibration as cal

@@ -1,4 +1,4 @@
-"""Issue 11 physics: body drag/added mass from the body's height, limb strip width, kick geometry."""
+"""Fluid sections: body drag/added mass from the body's height, limb strip width, kick geometry."""
 import numpy as np
 import pytest
 

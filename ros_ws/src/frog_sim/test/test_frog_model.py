@@ -55,7 +55,7 @@ def test_actuation_fit_reproduces_measured_profiles(library, measured_file):
 
 
 def test_actuation_profile_lookup_errors_name_the_value(library):
-    """Inside the measured hull a design is interpolated (issue 11); outside it is refused."""
+    """Inside the measured hull a design is interpolated; outside it is refused."""
     p15 = library.profile(15, 1.0)
     assert {(e, f) for e, f, _ in p15.interpolated_from} <= {(10.0, 1.0), (20.0, 1.0), (10.0, 0.9), (20.0, 1.1),
                                                               (10.0, 1.1), (20.0, 0.9)}
@@ -178,7 +178,7 @@ def test_symmetric_gait_swims_forward_without_turning(library):
 
 
 def test_every_parameter_has_a_range_or_choices_and_a_unit():
-    """One table (dataclass metadata) for descriptors and validation (issue 10)."""
+    """One table (dataclass metadata) for descriptors and validation."""
     from dataclasses import fields
 
     from frog_sim.core.model_parameters import parameter_range, parameter_specs, parameter_unit

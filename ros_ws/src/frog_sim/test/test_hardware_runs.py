@@ -1,4 +1,4 @@
-"""Hardware transitions (issue 11, Deliver 1): checked on logs the simulator writes itself."""
+"""Hardware transitions: checked on logs the simulator writes itself."""
 import numpy as np
 import pytest
 

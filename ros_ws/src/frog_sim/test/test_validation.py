@@ -1,4 +1,4 @@
-"""Against the authors' measurements and against refined discretisations (issue 3 list)."""
+"""Against the authors' measurements and against refined discretisations."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The tank's yaw torque in the planner's rollouts and its online estimate (issue 19).
+"""The tank's yaw torque in the planner's rollouts and its online estimate.
 
 Truth: ``FrogSimulation`` with the same forces stepped with the same steps (the rollouts run its
 step kernel), with its own yaw disturbance (recomputed every 20 ms, decaying exactly when its sd

@@ -9,7 +9,7 @@
 curvature minimum (end of the actuation phase). After the measured cycle
 (t >= 1/f) a limb that is not fired again holds the end-of-cycle curvature.
 
-Where the coefficients come from (issue 10, "runs anywhere")
+Where the coefficients come from ("runs anywhere")
 -----------------------------------------------------------
 The project's own fit of every measured profile ships with the package as
 ``frog_sim/data/actuation_fit.json`` (coefficients per EGaIn and frequency, each fit's

@@ -2,7 +2,7 @@
 
 The per-edge quadratic drag of eq. 1-2 is the only fluid force of the paper. A body
 floating at the free surface also loses energy in ways that a planar quadratic drag
-does not hold, each linear in velocity at these speeds (issue 18):
+does not hold, each linear in velocity at these speeds:
 
 * **radiation (wave-making) damping**: a body moving at the surface radiates waves that
   carry energy away; at low frequency and speed the force is linear in velocity

@@ -11,7 +11,7 @@ Layout (robot frame ``frog``: x forward, y left, origin at the body centre):
   ``-limb_root_angle_deg`` (rear limbs; default -90 deg: straight aft), the front limbs
   ``front_root_angle_offset_deg`` further forward (default 32: 58 deg aft of lateral).
   Fig. 2b gives no angle; both were calibrated jointly against the hardware turning
-  transitions and the speed experiments (``frog-sweep calibrate``, issue 11).
+  transitions and the speed experiments (``frog-sweep calibrate``).
 * Fluid sections: the body's edges take its height as D in eq. 1 and 3 (H_f at the front
   side to H_a at the rear, linear along the sides); the limb edges the strip width
   ``limb_fluid_width``.
@@ -21,7 +21,7 @@ Layout (robot frame ``frog``: x forward, y left, origin at the body centre):
   is curved (the polygon is inscribed in an arc tangent to the root direction). The
   limb's interior bends are actuated: natural curvature ``sign * kappa(t)`` (eq. 9),
   stiffness ``E(t) I``. Relaxed aft-pointing limbs curl away from the body axis
-  (``limb_curl_direction = 'forward'``, calibrated, issue 11; ``'backward'`` curls them
+  (``limb_curl_direction = 'forward'``, calibrated; ``'backward'`` curls them
   toward it); the fast unrolling kick drives the robot forward (+x), the slow
   re-curling (recovery) costs less because drag is quadratic.
 * No contact is modelled; a curled rear limb may overlap the body in the plane (in

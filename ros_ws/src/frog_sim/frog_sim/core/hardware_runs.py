@@ -1,4 +1,4 @@
-"""The real robot's closed-loop logs as per-decision transitions (issue 11, Deliver 1).
+"""The real robot's closed-loop logs as per-decision transitions.
 
 A hardware log (``shared/data/frog/hardware_runs/<run>.csv``, see its README) holds the
 overhead camera's tag pose at ~14 fps and the last primitive sent. From it we rebuild

@@ -1,4 +1,4 @@
-"""Online identification of the robot's four limb strengths from its tracked motion (issue 19).
+"""Online identification of the robot's four limb strengths from its tracked motion.
 
 Beyond the paper: real limbs differ (SMA wire, attachment, EGaIn fill; the twin draws each
 limb's kick from N(1, 0.1^2), and the authors' robot swam right on its straight runs), while

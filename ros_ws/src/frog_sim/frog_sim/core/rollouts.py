@@ -1,4 +1,4 @@
-"""Batched rollouts of the DER simulator for a planner decision (issue 19).
+"""Batched rollouts of the DER simulator for a planner decision.
 
 The planner's ``transitions: simulator`` mode (DESIGN.md, "Planning modes") asks the
 simulator itself what each primitive sequence does from the robot's estimated state.
@@ -247,7 +247,7 @@ def _run_jobs(counter, system, solver, work, state, f_ext, mass, torque0, torque
 
 
 class Rollouts:
-    """Batched rollouts of the frog simulator from an estimated state (issue 19).
+    """Batched rollouts of the frog simulator from an estimated state.
 
     Parameters
     ----------

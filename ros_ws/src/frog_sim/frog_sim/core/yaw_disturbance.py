@@ -1,4 +1,4 @@
-"""A slowly varying yaw torque on the swimming frog: the tank's disturbances (issue 18).
+"""A slowly varying yaw torque on the swimming frog: the tank's disturbances.
 
 Replayed open loop from each decision's measured state, the simulator's heading change
 per period differs from the robot's by about 4 deg (sd), and the differences of

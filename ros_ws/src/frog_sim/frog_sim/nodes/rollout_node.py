@@ -1,4 +1,4 @@
-"""``rollout_node``: the DER simulator as a transition model for the planner (issue 19).
+"""``rollout_node``: the DER simulator as a transition model for the planner.
 
 Service ``frog/rollouts`` (soft_robot_interfaces/Rollouts): from the robot's estimated
 state (tracked pose, body twist, and how long ago each limb was fired) it rolls out every
