@@ -1,5 +1,5 @@
 """``frog-twin --planner-compare``: the paper's planner against this project's, with the library and
-with the simulator in the loop (issue 19.3), each run as the whole twin (vision, serial link).
+with the simulator in the loop, each run as the whole twin (vision, serial link).
 
 Planners, on the same twin and library:
 

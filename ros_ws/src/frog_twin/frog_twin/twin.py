@@ -22,7 +22,7 @@ frog-twin --path line --no-vision            # ground-truth odometry instead of 
 frog-twin --path ellipse --direct            # planner -> simulator without the serial link
 frog-twin --path line --depth 2 --w-heading 150 --duration 60
 
-Faults (issue 22): inject them at simulated times after the planner's start; a crashed node is
+Faults: inject them at simulated times after the planner's start; a crashed node is
 restarted with back-off; the run ends completed, stopped cleanly (with the reason) or failed, and
 says how many limb firings were made on stale state and what the recorder lost (both must be 0):
 
@@ -567,7 +567,7 @@ def _main(argv=None) -> int:
     ap.add_argument("--path", default=None,
                     help=f"path(s) to follow: {', '.join(PATH_NAMES)} or all (default); with --replay the run's "
                          "reference path CSV (default: <run>_path.csv beside RUN.csv)")
-    rg = ap.add_argument_group("hardware replay (issue 18)")
+    rg = ap.add_argument_group("hardware replay")
     what = rg.add_mutually_exclusive_group()
     what.add_argument("--replay", type=Path, metavar="RUN.csv",
                       help="re-run this hardware log (authors' format) in the twin, beside the real trajectory")
@@ -594,7 +594,7 @@ def _main(argv=None) -> int:
     ap.add_argument("--real-time-factor", type=float, default=1.0,
                     help="simulated seconds per wall second (all nodes follow /clock)")
     ap.add_argument("--seed", type=int, default=1, help="seed of every random element (noise, BLE jitter, limbs)")
-    cg = ap.add_argument_group("planner comparison (issue 19)")
+    cg = ap.add_argument_group("planner comparison")
     cg.add_argument("--planner-compare", action="store_true",
                     help="run the paper's planner, the project's, and the simulator in the loop at depth 1 and 2 "
                          "on each path with --seeds seeds; one table (compare.md) and one figure per path; "
@@ -630,7 +630,7 @@ def _main(argv=None) -> int:
                     help="motion library (default runs/library/frog_default.npz, generated on first use)")
     ap.add_argument("--library-states", type=int, default=200, help="size of the default library if generated")
     ap.add_argument("--out", type=Path, default=None, help="run folder (default runs/main_<time>)")
-    rr = ap.add_argument_group("the real robot (issue 20): the same graph with the real camera and port")
+    rr = ap.add_argument_group("the real robot: the same graph with the real camera and port")
     rr.add_argument("--robot-port", type=Path, default=None, help="serial device of the BLE relay (e.g. /dev/ttyACM0)")
     rr.add_argument("--camera", default=None, help="camera_node source: a device (/dev/video0), an index, a video file")
     rr.add_argument("--camera-info", type=Path, default=None, help="the camera's camera_calibration YAML")
@@ -654,7 +654,7 @@ def _main(argv=None) -> int:
     gg.add_argument("--mode", choices=("sim", "real"), default=None,
                     help="with --print-graph: the twin's graph (sim, default) or the real robot's (real; implied by "
                          "--robot-port / --camera)")
-    fg = ap.add_argument_group("faults (issue 22)")
+    fg = ap.add_argument_group("faults")
     fg.add_argument("--faults", metavar="SPEC", default=None,
                     help="inject faults: ';'-separated KIND[:NODE]@AT[+DURATION][,key=value], AT in simulated s after "
                          "the planner's start; kinds: camera_freeze, camera_stop, occlude, frame_drop (rate=), "

@@ -159,7 +159,7 @@ def test_turning_response_mirrors_and_matches_its_own_track():
     assert e.steady_radius == pytest.approx(f.steady_radius, rel=1e-4)
     assert e.steady_yaw_rate == pytest.approx(-f.steady_yaw_rate, rel=1e-4) and e.steady_yaw_rate < 0
     assert e.steady_radius == pytest.approx(e.steady_speed / abs(e.steady_yaw_rate), rel=0.15)
-    # issue 11: the real robot reaches 63 % of its steady E/F yaw rate within ~2.3 s; the
+    # the real robot reaches 63 % of its steady E/F yaw rate within ~2.3 s; the
     # earlier simulator took ~12 s (several periods), today's within the first periods
     assert 0 < e.rise_time < 3 * PERIOD
     assert path_min_radius(line_path()) == math.inf

@@ -144,7 +144,7 @@ def test_restart_windows_end_a_discovery_after_the_first_message_after_each_rest
 
 
 def test_a_restarted_recorder_is_down_on_a_topic_until_a_new_subscription_of_it_appears():
-    """Session 31's series: the recorder restarted at 12.46 s subscribed to /frog/bridge/sent only
+    """Seen in a series of runs: the recorder restarted at 12.46 s subscribed to /frog/bridge/sent only
     after 17.164 s, when a message had been sent there; the window after the first message since the
     restart (restart_windows) had ended at 15.9 s, and the report called that message lost."""
     topics = ("/p", "/s")

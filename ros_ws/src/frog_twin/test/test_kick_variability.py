@@ -1,4 +1,4 @@
-"""The twin's variability against the robot's (issue 18): yaw disturbance, kick spread, limb spread.
+"""The twin's variability against the robot's: yaw disturbance, kick spread, limb spread.
 
 Truth is the hardware runs. The deterministic model replays each decision for one period
 from its measured state; the robot's heading differs from it by a residual whose

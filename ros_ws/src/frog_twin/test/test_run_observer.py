@@ -1,6 +1,6 @@
 """The twin's watch (RunObserver): when the recorder counts as up for the recording check.
 
-Session 33's series: a SIGSTOPped recorder was killed for deaf and restarted; the restarted one met
+Seen in a series of runs: a SIGSTOPped recorder was killed for deaf and restarted; the restarted one met
 the restarted-reader wedge (subscribed to /frog/bridge/sent, receiving nothing, never subscribed to the
 planner's topics), and while the supervisor waited 15 s for it to get ready the check counted it up, so
 7 messages it never received were "lost while up" and the run failed.

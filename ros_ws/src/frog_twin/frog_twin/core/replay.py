@@ -1,4 +1,4 @@
-"""Hardware replay: one of the real robot's closed-loop experiments, set up for the twin (issue 18.2).
+"""Hardware replay: one of the real robot's closed-loop experiments, set up for the twin.
 
 From an authors' log (``<run>.csv``, ``shared/data/frog/hardware_runs/README.md``) and its
 reference path (``<run>_path.csv``), through :mod:`frog_sim.core.hardware_runs` (which
