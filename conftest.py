@@ -179,33 +179,34 @@ def _fail_if_started(item, phase):
                     f"during its {phase}: mark it 'system' (pytest.ini), or start nothing", pytrace=False)
 
 
+@contextmanager
+def _guarded(item, phase):
+    """Watch one phase of a fast test for started processes (the guard ends with the phase)."""
+    GUARD.begin()
+    try:
+        yield
+    except BaseException:
+        GUARD.end()
+        raise
+    _fail_if_started(item, phase)
+
+
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_setup(item):
     if is_system(item):
         return (yield)
     GUARD.excluded_cpu = 0.0
     item.stash[_CPU_AT_SETUP] = time.process_time()
-    GUARD.begin()
-    try:
-        result = yield
-    except BaseException:
-        GUARD.end()
-        raise
-    _fail_if_started(item, "set-up")
-    return result
+    with _guarded(item, "set-up"):
+        return (yield)
 
 
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_call(item):
     if is_system(item):
         return (yield)
-    GUARD.begin()
-    try:
+    with _guarded(item, "call"):
         result = yield
-    except BaseException:
-        GUARD.end()
-        raise
-    _fail_if_started(item, "call")
     cpu = time.process_time() - item.stash[_CPU_AT_SETUP] - GUARD.excluded_cpu
     if cpu > FAST_CPU_NOTE_S:
         item.user_properties.append(("fast_tier_cpu_s", round(cpu, 1)))
@@ -234,14 +235,8 @@ def pytest_terminal_summary(terminalreporter):
 def pytest_runtest_teardown(item, nextitem):
     if is_system(item):
         return (yield)
-    GUARD.begin()
-    try:
-        result = yield
-    except BaseException:
-        GUARD.end()
-        raise
-    _fail_if_started(item, "teardown")
-    return result
+    with _guarded(item, "teardown"):
+        return (yield)
 
 
 @pytest.hookimpl(wrapper=True)
