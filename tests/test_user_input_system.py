@@ -418,9 +418,9 @@ def test_sim_real_time_factors_are_measured_from_a_live_change(launch, probe):
     values = diag[-1][1]
     achieved, compute = float(values["achieved_real_time_factor"]), float(values["compute_real_time_factor"])
     assert achieved == pytest.approx(0.5, abs=0.15), values
-    # the step cost since the change: the sim computes far faster than 0.5 (about 60 here);
-    # measured from the start instead it read ~2 (the flat-out seconds before the change)
-    assert compute > 10.0, values
+    # the step cost since the change: paced at 0.5 the sim still computes far faster (about 18 on
+    # a quiet machine, 8 on a loaded one); measured from the start instead it read ~2
+    assert compute > 4.0, values
 
 
 @pytest.mark.parametrize("exe, param", [("planner_node", "world_frame"), ("bridge_node", "imu_frame"),
