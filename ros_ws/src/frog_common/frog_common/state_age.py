@@ -24,6 +24,9 @@ from frog_common.settings import Settings, setting
 
 #: The default bound [s] (see the module docstring).
 MAX_STATE_AGE_S = 0.5
+#: Ages are compared to the microsecond: the difference of two float stamps carries round-off
+#: (4.4 - 3.9 = 0.5000000000000004), which must not turn a state exactly at the bound into a stale one.
+AGE_RESOLUTION_S = 1e-6
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,12 @@ def command_state(state_stamp: float, header_stamp: float, now: float) -> float:
     return header_stamp if header_stamp > 0.0 else now
 
 
+def older_than(age, bound: float):
+    """Whether ``age`` [s] (a number or an array) exceeds ``bound`` by more than the round-off of
+    two stamps' difference (:data:`AGE_RESOLUTION_S`)."""
+    return age > bound + AGE_RESOLUTION_S
+
+
 def state_age_problem(age: float, bound: float) -> str | None:
     """Why a state ``age`` [s] old may not drive a limb under ``bound``, or None.
 
@@ -55,8 +64,10 @@ def state_age_problem(age: float, bound: float) -> str | None:
     True
     >>> state_age_problem(0.62, 0.5)
     'the state is 0.620 s old (max_state_age_s 0.5 s)'
+    >>> state_age_problem(4.4 - 3.9, 0.5) is None      # exactly at the bound, with round-off
+    True
     """
-    if age > bound:
+    if older_than(age, bound):
         return f"the state is {age:.3f} s old (max_state_age_s {bound:g} s)"
     if age < -bound:
         return (f"the state is stamped {-age:.3f} s in the future (do the sender and this node use the same "

@@ -87,3 +87,15 @@ def test_the_recording_is_complete_while_the_recorder_is_up_and_has_matched_the_
     assert complete_intervals([(0.0, 0.5)], []) == []               # up for less than the margin
     assert complete_intervals([(0.0, 10.0)], [(-5.0, 20.0)]) == []  # a hole over all of it
     assert complete_intervals([(0.0, 10.0)], [(12.0, 14.0)]) == [(1.0, 10.0)]
+
+
+def test_a_pulse_exactly_at_the_bound_is_not_stale_for_the_round_off_of_its_stamps():
+    # a frame captured at 3.9 s, the pulse at 4.4 s: 4.4 - 3.9 = 0.5000000000000004 in floats, and the
+    # bridge, which let it through at exactly 0.5 s, claims 0.5
+    odom = [(3.9, 1000.0 + 3.9 + 0.04, 1000.0 + 3.9 + 0.045)]
+    ages = pulse_ages([_pulse(4.4, claim=0.5)], measured_poses(odom), bound_s=0.5)
+    assert ages.published[0] > 0.5 and ages.stale() == []
+    # a microsecond and more past the bound is stale, by the recording and by the bridge's record
+    late = pulse_ages([_pulse(4.40001, claim=0.5)], measured_poses(odom), bound_s=0.5)
+    assert [b["stamp"] for b in late.stale()] == [4.40001]
+    assert len(pulse_ages([_pulse(4.4, claim=0.50001)], measured_poses(odom), bound_s=0.5).stale()) == 1

@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from frog_common.state_age import older_than
+
 
 @dataclass
 class PulseAges:
@@ -51,8 +53,8 @@ class PulseAges:
         The receive times are reported, not judged: the recorder takes each topic's queue in turn, so a
         pulse can be received before odometry published earlier (seen: 5.3 s apart while the recorder
         caught up after a restarted camera), which is the recorder's order, not the robot's."""
-        recorded = self.judged() & (self.published > self.bound_s)
-        bad = recorded | (self.claimed > self.bound_s)
+        recorded = self.judged() & older_than(self.published, self.bound_s)
+        bad = recorded | older_than(self.claimed, self.bound_s)
         return [{"t": float(self.times[i]), "stamp": float(self.stamps[i]), "published": float(self.published[i]),
                  "received": float(self.received[i]), "claimed": float(self.claimed[i])} for i in np.flatnonzero(bad)]
 
