@@ -39,6 +39,7 @@ import numpy as np
 from numba import njit
 
 from .element_sets import register_explicit_term
+from .lumped_wrench import rigid_motion, spread_wrench
 
 
 @njit(cache=True, error_model='numpy')
@@ -59,40 +60,18 @@ def body_damping_force(x, v, mass, reference, surge, sway, yaw, out):
     yaw : float
         N_r [N m s/rad].
     """
-    n = mass.shape[0]
-    mt = 0.0
-    cx = 0.0
-    cy = 0.0
-    vx = 0.0
-    vy = 0.0
-    for i in range(n):
-        m = mass[i]
-        mt += m
-        cx += m * x[2 * i]
-        cy += m * x[2 * i + 1]
-        vx += m * v[2 * i]
-        vy += m * v[2 * i + 1]
-    cx /= mt
-    cy /= mt
-    vx /= mt
-    vy /= mt
-    inertia = 0.0
-    ang = 0.0
-    cross = 0.0
-    dot = 0.0
-    for i in range(n):
-        m = mass[i]
-        rx = x[2 * i] - cx
-        ry = x[2 * i + 1] - cy
-        inertia += m * (rx * rx + ry * ry)
-        ang += m * (rx * (v[2 * i + 1] - vy) - ry * (v[2 * i] - vx))
-        cross += m * (reference[i, 0] * ry - reference[i, 1] * rx)
-        dot += m * (reference[i, 0] * rx + reference[i, 1] * ry)
-    r = ang / inertia
+    mt, cx, cy, vx, vy, inertia, r = rigid_motion(x, v, mass)
     if surge == sway:
         fx = -surge * vx
         fy = -surge * vy
     else:
+        cross = 0.0
+        dot = 0.0
+        for i in range(mass.shape[0]):
+            rx = x[2 * i] - cx
+            ry = x[2 * i + 1] - cy
+            cross += mass[i] * (reference[i, 0] * ry - reference[i, 1] * rx)
+            dot += mass[i] * (reference[i, 0] * rx + reference[i, 1] * ry)
         th = np.arctan2(cross, dot)
         c = np.cos(th)
         s = np.sin(th)
@@ -101,12 +80,7 @@ def body_damping_force(x, v, mass, reference, surge, sway, yaw, out):
         fx = c * fu - s * fw
         fy = s * fu + c * fw
     torque = -yaw * r
-    for i in range(n):
-        m = mass[i]
-        rx = x[2 * i] - cx
-        ry = x[2 * i + 1] - cy
-        out[2 * i] = m * fx / mt - m * torque * ry / inertia
-        out[2 * i + 1] = m * fy / mt + m * torque * rx / inertia
+    spread_wrench(x, mass, mt, cx, cy, inertia, fx, fy, torque, out)
     return fx * vx + fy * vy + torque * r
 
 

@@ -41,6 +41,8 @@ import numpy as np
 from numba import njit
 
 from .element_sets import register_explicit_term
+from .lumped_wrench import rigid_motion, spread_wrench
+
 
 def waterline_friction_coefficients(friction_per_length: float, side_length: float) -> tuple[float, float]:
     """(F_c [N], N_c [N m]) of a square waterline of side ``side_length`` [m] with contact-line
@@ -75,44 +77,14 @@ def waterline_friction_force(x, v, mass, translation, yaw, out):
     yaw : float
         N_c, the friction torque against the yaw rate [N m].
     """
-    n = mass.shape[0]
-    mt = 0.0
-    cx = 0.0
-    cy = 0.0
-    vx = 0.0
-    vy = 0.0
-    for i in range(n):
-        m = mass[i]
-        mt += m
-        cx += m * x[2 * i]
-        cy += m * x[2 * i + 1]
-        vx += m * v[2 * i]
-        vy += m * v[2 * i + 1]
-    cx /= mt
-    cy /= mt
-    vx /= mt
-    vy /= mt
-    inertia = 0.0
-    ang = 0.0
-    for i in range(n):
-        m = mass[i]
-        rx = x[2 * i] - cx
-        ry = x[2 * i + 1] - cy
-        inertia += m * (rx * rx + ry * ry)
-        ang += m * (rx * (v[2 * i + 1] - vy) - ry * (v[2 * i] - vx))
-    r = ang / inertia
+    mt, cx, cy, vx, vy, inertia, r = rigid_motion(x, v, mass)
     speed = np.sqrt(vx * vx + vy * vy)
     # tanh(s / v_s) / s -> 1 / v_s at rest: no division by zero
     k = translation * (np.tanh(speed / SPEED_SCALE) / speed if speed > 1e-12 * SPEED_SCALE else 1.0 / SPEED_SCALE)
     fx = -k * vx
     fy = -k * vy
     torque = -yaw * np.tanh(r / YAW_RATE_SCALE)
-    for i in range(n):
-        m = mass[i]
-        rx = x[2 * i] - cx
-        ry = x[2 * i + 1] - cy
-        out[2 * i] = m * fx / mt - m * torque * ry / inertia
-        out[2 * i + 1] = m * fy / mt + m * torque * rx / inertia
+    spread_wrench(x, mass, mt, cx, cy, inertia, fx, fy, torque, out)
     return fx * vx + fy * vy + torque * r
 
 
