@@ -185,6 +185,11 @@ def table(records) -> str:
 
 
 def main(argv=None) -> int:
+    from soft_robot_common.graph_watch import exit_status
+    return exit_status(_main(argv))
+
+
+def _main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="frog-outside-faults", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--path", default="line", choices=tuple(NOMINAL_TIME_S), help="path of a single run")

@@ -550,15 +550,17 @@ def print_graph(args) -> int:
 
 def main(argv=None) -> int:
     """``frog-twin``; SIGTERM and SIGHUP stop it as Ctrl-C does, the nodes it started first."""
+    from soft_robot_common.graph_watch import exit_status
     restore = stop_on_signals()
     try:
-        return _main(argv)
+        code = _main(argv)
     except KeyboardInterrupt as exc:
         print(f"frog-twin: stopped ({exc.args[0] if exc.args else 'Ctrl-C'}); its nodes are stopped",
               file=sys.stderr, flush=True)
-        return 130
+        code = 130
     finally:
         restore()
+    return exit_status(code)
 
 
 def _main(argv=None) -> int:

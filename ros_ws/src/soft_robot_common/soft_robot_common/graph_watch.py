@@ -8,10 +8,38 @@ message that says what did not happen (and which node process died meanwhile).
 
 from __future__ import annotations
 
+import os
+import sys
+import threading
 import time
+import traceback
 from typing import Callable, Iterable
 
 from .tool_signals import rclpy_call
+
+#: How long :meth:`GraphWatch.close` waits for the middleware's teardown before leaving it behind.
+#: Fast DDS 2.14 can deadlock there: a participant's event thread and a receive thread take its
+#: discovery lock and its timer lock in opposite orders when remote participants leave.
+TEARDOWN_S = 6.0
+
+# teardown threads still blocked in the middleware: the process must then end with os._exit
+_ABANDONED: list[threading.Thread] = []
+
+
+def teardown_abandoned() -> bool:
+    """Whether a watch's teardown was left blocked: the caller ends its process with ``os._exit``,
+    since the middleware's own exit handlers would block on the same locks."""
+    return any(t.is_alive() for t in _ABANDONED)
+
+
+def exit_status(code: int) -> int:
+    """``code``; or, when a watch's teardown was left blocked, the process ends here with it."""
+    if teardown_abandoned():
+        print(f"exiting with {code} without the middleware's exit handlers (a watch's teardown is blocked)",
+              file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(code)
+    return code
 
 # Requests with no side effect beyond an idempotent set: safe to re-send. ForwardKinematics is a
 # pure query of the finger's model (a re-send costs one more solve); SolveIk is not re-sent: it
@@ -167,8 +195,24 @@ class GraphWatch:
         return next(f for f in futures if f.done()).result()
 
     def close(self) -> None:
-        """Destroy the node and its context (again: nothing)."""
-        if self.context.ok():
+        """Destroy the node and its context (again: nothing). A teardown that does not return within
+        :data:`TEARDOWN_S` is left behind in its thread, with a message saying where it is blocked."""
+        if getattr(self, "_closing", False) or not self.context.ok():
+            return
+        self._closing = True
+
+        def teardown():
             self.executor.shutdown()
             self.node.destroy_node()
             self._rclpy.shutdown(context=self.context)
+
+        thread = threading.Thread(target=teardown, name="graph_watch teardown", daemon=True)
+        thread.start()
+        thread.join(TEARDOWN_S)
+        if thread.is_alive():
+            _ABANDONED.append(thread)
+            frame = sys._current_frames().get(thread.ident)
+            where = "".join(traceback.format_stack(frame)) if frame is not None else "(no frame)\n"
+            print(f"graph watch on domain {self.domain_id}: the middleware's teardown (destroy_node, "
+                  f"rclpy.shutdown) is still blocked after {TEARDOWN_S:g} s; leaving it behind. "
+                  f"Where it is:\n{where}", file=sys.stderr, flush=True)
