@@ -15,12 +15,12 @@ import time
 import traceback
 from typing import Callable, Iterable
 
+from .processes import MIDDLEWARE_TEARDOWN_S
 from .tool_signals import rclpy_call
 
-#: How long :meth:`GraphWatch.close` waits for the middleware's teardown before leaving it behind.
-#: Fast DDS 2.14 can deadlock there: a participant's event thread and a receive thread take its
-#: discovery lock and its timer lock in opposite orders when remote participants leave.
-TEARDOWN_S = 6.0
+# GraphWatch.close leaves the teardown behind after MIDDLEWARE_TEARDOWN_S: Fast DDS 2.14 can
+# deadlock there (a participant's event thread and a receive thread take its discovery lock and its
+# timer lock in opposite orders when remote participants leave).
 
 # teardown threads still blocked in the middleware: the process must then end with os._exit
 _ABANDONED: list[threading.Thread] = []
@@ -196,7 +196,7 @@ class GraphWatch:
 
     def close(self) -> None:
         """Destroy the node and its context (again: nothing). A teardown that does not return within
-        :data:`TEARDOWN_S` is left behind in its thread, with a message saying where it is blocked."""
+        ``MIDDLEWARE_TEARDOWN_S`` is left behind in its thread, with a message saying where it is."""
         if getattr(self, "_closing", False) or not self.context.ok():
             return
         self._closing = True
@@ -208,11 +208,11 @@ class GraphWatch:
 
         thread = threading.Thread(target=teardown, name="graph_watch teardown", daemon=True)
         thread.start()
-        thread.join(TEARDOWN_S)
+        thread.join(MIDDLEWARE_TEARDOWN_S)
         if thread.is_alive():
             _ABANDONED.append(thread)
             frame = sys._current_frames().get(thread.ident)
             where = "".join(traceback.format_stack(frame)) if frame is not None else "(no frame)\n"
             print(f"graph watch on domain {self.domain_id}: the middleware's teardown (destroy_node, "
-                  f"rclpy.shutdown) is still blocked after {TEARDOWN_S:g} s; leaving it behind. "
+                  f"rclpy.shutdown) is still blocked after {MIDDLEWARE_TEARDOWN_S:g} s; leaving it behind. "
                   f"Where it is:\n{where}", file=sys.stderr, flush=True)

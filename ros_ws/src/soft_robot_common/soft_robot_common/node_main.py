@@ -22,7 +22,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from .clock_watch import SimClockWatch
 from .parameters import ConfigurationError, undeclared_overrides
-from .processes import PARENT_PID_ENV
+from .processes import MIDDLEWARE_TEARDOWN_S, PARENT_PID_ENV
 
 PR_SET_PDEATHSIG = 1     # <linux/prctl.h>
 # A spin loop that has not come back for this long (a callback blocked in the middleware, or the
@@ -30,11 +30,10 @@ PR_SET_PDEATHSIG = 1     # <linux/prctl.h>
 # node's log), from faulthandler's own thread, so a hang is diagnosable even inside C. Below
 # NodeProcess.stop's 10 s wait for SIGINT, so the dump is written before the escalation.
 STUCK_DUMP_S = 8.0
-# destroy_node (a node's own clean-up there, e.g. a worker's 5 s stop, then the middleware's) and
-# rclpy.shutdown may take this long [s]; then the process exits without them, saying where they
-# were. Fast DDS can block for good deleting an image publisher whose reliable subscriber was
-# SIGKILLed (camera_sim, docs/faults.md). close() has run by then; below NodeProcess.stop's 10 s.
-MIDDLEWARE_TEARDOWN_S = 6.0
+# After MIDDLEWARE_TEARDOWN_S of destroy_node (a node's own clean-up there, e.g. a worker's 5 s
+# stop, then the middleware's) and rclpy.shutdown the process exits without them, saying where
+# they were: Fast DDS can block for good deleting an image publisher whose reliable subscriber was
+# SIGKILLed (camera_sim, docs/faults.md). close() has run by then.
 
 
 class _StopRequest:

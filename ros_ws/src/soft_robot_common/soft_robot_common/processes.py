@@ -30,6 +30,10 @@ LOCK_DIR = Path("/tmp/soft_robot_test_domains")
 #: (scripts/dds_writer_block_repro.py: 9 of 355 s; UDPv4 0 of 357 s), once for good in the
 #: fault tests (docs/faults.md, "The whole suite under load").
 FASTDDS_TRANSPORTS = "UDPv4"
+# How long a process's middleware teardown (destroy_node, rclpy.shutdown) may take [s] before it is
+# left behind, saying where it was: Fast DDS can block for good there (docs/faults.md). Below
+# NodeProcess.stop's 10 s wait for SIGINT.
+MIDDLEWARE_TEARDOWN_S = 6.0
 
 
 @dataclass

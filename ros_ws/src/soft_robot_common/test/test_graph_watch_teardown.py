@@ -44,7 +44,7 @@ def test_a_teardown_that_returns_runs_in_order_once():
 
 
 def test_a_blocked_teardown_is_left_behind_after_the_bound_and_says_where(monkeypatch, capsys):
-    monkeypatch.setattr(graph_watch, "TEARDOWN_S", 0.3)
+    monkeypatch.setattr(graph_watch, "MIDDLEWARE_TEARDOWN_S", 0.3)
     release = threading.Event()
     w, calls = _watch(lambda: release.wait(30))
     t0 = time.monotonic()
